@@ -1,0 +1,31 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'global_loc'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/maps', glob('maps/*.yaml') + glob('maps/*.pgm') + glob('maps/*.png')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='global_loc developers',
+    maintainer_email='dev@global-loc.invalid',
+    description='Single-scan global localization in a known map (ROS 2 Jazzy).',
+    license='BSD-3-Clause',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'server = global_loc.server:main',
+            'test_global_loc = global_loc.client:main',
+            'sim = global_loc.sim.node:main',
+            'localize = global_loc.cli:main',
+        ],
+    },
+)
