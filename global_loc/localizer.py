@@ -1,0 +1,129 @@
+"""The pipeline: scan -> points -> matcher -> distinct hypotheses -> base pose, result.
+
+`Localizer` holds one map and the matchers built for it (each built on first use and
+kept, so a server pays a matcher's precomputation once). The ROS server, the CLI and
+the benchmark all call `Localizer.localize`.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from .map_io import OccupancyMap
+from .matchers import Candidate, MatchOptions, make_matcher, resolve_method
+from .matchers.base import ProgressFn
+from .scan import Scan, scan_to_points
+from .transform import Rigid2D, normalize_angle
+
+
+@dataclass
+class LocalizerConfig:
+    """Every knob of the pipeline, documented once; ROS parameters and CLI flags fill it."""
+    method: str = 'template_ccoeff'        # matcher name, see matchers.method_names()
+    angle_step_deg: float = 5.0            # Δα of the rotated-template matcher
+    opening_kernel: int = 3                # morphological opening of the local map, pixels (0 = off)
+    num_hypotheses: int = 5                # distinct hypotheses returned
+    hypothesis_min_distance: float = 1.0   # m: closer poses ...
+    hypothesis_min_angle_deg: float = 20.0  # ... with closer headings are one hypothesis
+    # Fixed covariance (thesis §3.1); defaults are AMCL's initial_cov_{xx,yy,aa}.
+    covariance_xy: float = 0.25            # m^2
+    covariance_yaw: float = 0.0685         # rad^2 ((15 deg)^2)
+    base_T_laser: Rigid2D = field(default_factory=Rigid2D)   # laser mounting on the robot base
+
+
+@dataclass
+class Hypothesis:
+    pose: Rigid2D          # robot base in the map frame
+    score: float
+
+
+@dataclass
+class LocalizationResult:
+    success: bool
+    message: str
+    method: str
+    pose: Optional[Rigid2D] = None          # best hypothesis (base in map frame)
+    score: float = float('nan')
+    confidence: float = 0.0
+    covariance: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))   # x, y, yaw
+    hypotheses: list = field(default_factory=list)
+    time_s: float = 0.0
+    dropped: dict = field(default_factory=dict)
+
+
+def distinct(candidates: list[Candidate], k: int, min_distance: float, min_angle: float) -> list[Candidate]:
+    """Non-maximum suppression in (x, y, yaw): the best k candidates no two of which are
+    within min_distance metres *and* min_angle radians of each other."""
+    kept: list[Candidate] = []
+    for c in sorted(candidates, key=lambda c: -c.score):
+        if all(c.laser_pose.distance_to(o.laser_pose)[0] >= min_distance or
+               c.laser_pose.distance_to(o.laser_pose)[1] >= min_angle for o in kept):
+            kept.append(c)
+            if len(kept) == k:
+                break
+    return kept
+
+
+def margin_confidence(scores: list[float]) -> float:
+    """0..1: how far the best score stands above the next distinct hypothesis."""
+    if not scores or scores[0] <= 0:
+        return 0.0
+    if len(scores) == 1:
+        return 1.0
+    return float(np.clip((scores[0] - scores[1]) / scores[0], 0.0, 1.0))
+
+
+class Localizer:
+    def __init__(self, occupancy_map: OccupancyMap, config: Optional[LocalizerConfig] = None):
+        self.map = occupancy_map
+        self.config = config or LocalizerConfig()
+        self._matchers = {}
+
+    def matcher(self, method: str):
+        """The matcher for `method`, built (precomputed for this map) on first use."""
+        name = resolve_method(method)
+        if name not in self._matchers:
+            self._matchers[name] = make_matcher(name, self.map)
+        return self._matchers[name]
+
+    def localize(self, scan: Scan, method: Optional[str] = None, angle_step_deg: Optional[float] = None,
+                 progress: Optional[ProgressFn] = None) -> LocalizationResult:
+        """Localize one scan. Raises ScanError for an unusable scan, MethodError for an
+        unknown method and Cancelled if `progress` raises it; otherwise returns a result,
+        successful or not."""
+        cfg = self.config
+        t0 = time.perf_counter()
+        points = scan_to_points(scan)
+        matcher = self.matcher(method or cfg.method)
+        options = MatchOptions(angle_step_deg=angle_step_deg or cfg.angle_step_deg,
+                               opening_kernel=cfg.opening_kernel)
+        if not (0 < options.angle_step_deg <= 180):
+            raise ValueError(f'angle step must be in (0, 180] degrees, got {options.angle_step_deg}')
+        candidates = matcher.match(points, options, progress)
+        best = distinct(candidates, cfg.num_hypotheses, cfg.hypothesis_min_distance,
+                        math.radians(cfg.hypothesis_min_angle_deg))
+        laser_T_base = cfg.base_T_laser.inverse()
+        hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in best]
+        elapsed = time.perf_counter() - t0
+        result = LocalizationResult(False, '', matcher.name, time_s=elapsed, dropped=points.dropped,
+                                    hypotheses=hyps,
+                                    covariance=np.diag([cfg.covariance_xy, cfg.covariance_xy, cfg.covariance_yaw]))
+        if not hyps:
+            result.message = f'{matcher.name} found no match'
+            return result
+        result.pose, result.score = hyps[0].pose, hyps[0].score
+        result.confidence = margin_confidence([h.score for h in hyps])
+        result.success = hyps[0].score >= matcher.min_score
+        result.message = 'localized' if result.success else \
+            f'best score {hyps[0].score:.3f} is below {matcher.name}\'s minimum {matcher.min_score}'
+        return result
+
+
+def pose_error(estimate: Rigid2D, truth: Rigid2D) -> tuple[float, float]:
+    """(metres, degrees) between two poses."""
+    d, a = estimate.distance_to(truth)
+    return d, math.degrees(abs(normalize_angle(a)))

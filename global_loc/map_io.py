@@ -1,0 +1,209 @@
+"""Occupancy maps: loading nav2_map_server YAML + image, or an OccupancyGrid-like array,
+and the conversion between map metres and image pixels.
+
+Conventions (those of nav2_map_server / nav_msgs/OccupancyGrid):
+- `occupancy[row, col]` in image order: row 0 is the top of the image = the largest y.
+  Values: 100 occupied, 0 free, -1 unknown (`scale` mode: 0..100).
+- `origin` is the pose of the lower-left corner of the lower-left pixel in the map frame.
+- A pixel's "grid frame" has x along columns and y up along rows, in metres, with its
+  origin at the lower-left image corner; `origin * grid` is the map frame.
+- Continuous pixel coordinates (u, v) follow OpenCV: pixel (col, row) has its centre at
+  (u, v) = (col, row).
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import yaml
+
+from .transform import Rigid2D
+
+OCCUPIED = 100
+FREE = 0
+UNKNOWN = -1
+
+
+class MapError(ValueError):
+    """A map could not be loaded or is malformed; the message names the file and the problem."""
+
+
+@dataclass
+class OccupancyMap:
+    occupancy: np.ndarray          # int8 (H, W), image row order, 100 / 0 / -1
+    resolution: float              # metres per cell
+    origin: Rigid2D                # map_T_grid: lower-left corner of the image
+    source: str = '<array>'
+
+    @property
+    def height(self) -> int:
+        return self.occupancy.shape[0]
+
+    @property
+    def width(self) -> int:
+        return self.occupancy.shape[1]
+
+    @property
+    def occupied(self) -> np.ndarray:
+        """Boolean mask of occupied cells."""
+        return self.occupancy >= 65 if self.occupancy.dtype != bool else self.occupancy
+
+    @property
+    def free(self) -> np.ndarray:
+        return (self.occupancy >= 0) & (self.occupancy < 35)
+
+    def pixel_to_grid(self, uv) -> np.ndarray:
+        """(N, 2) continuous pixel coordinates -> (N, 2) grid-frame metres."""
+        uv = np.asarray(uv, dtype=float).reshape(-1, 2)
+        return np.stack([(uv[:, 0] + 0.5) * self.resolution,
+                         (self.height - uv[:, 1] - 0.5) * self.resolution], axis=1)
+
+    def grid_to_pixel(self, xy) -> np.ndarray:
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        return np.stack([xy[:, 0] / self.resolution - 0.5,
+                         self.height - xy[:, 1] / self.resolution - 0.5], axis=1)
+
+    def pixel_to_world(self, uv) -> np.ndarray:
+        return self.origin.apply(self.pixel_to_grid(uv))
+
+    def world_to_pixel(self, xy) -> np.ndarray:
+        return self.grid_to_pixel(self.origin.inverse().apply(xy))
+
+    def is_free_at(self, xy) -> np.ndarray:
+        """True where the world points fall on free cells inside the map."""
+        uv = np.rint(self.world_to_pixel(xy)).astype(int)
+        inside = (uv[:, 0] >= 0) & (uv[:, 0] < self.width) & (uv[:, 1] >= 0) & (uv[:, 1] < self.height)
+        out = np.zeros(len(uv), dtype=bool)
+        out[inside] = self.free[uv[inside, 1], uv[inside, 0]]
+        return out
+
+    def obstacle_image(self) -> np.ndarray:
+        """uint8 image, 255 on occupied cells and 0 elsewhere (the matchers' polarity)."""
+        return np.where(self.occupied, 255, 0).astype(np.uint8)
+
+    def surface_image(self) -> np.ndarray:
+        """uint8 image, 255 on occupied cells that touch a free cell (8-neighbourhood):
+        the wall surfaces a laser can hit. A scan's local map shows one-cell surfaces, not
+        the walls' thickness, so image matchers compare like with like against this."""
+        free_nearby = cv2.dilate(self.free.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+        return np.where(self.occupied & free_nearby, 255, 0).astype(np.uint8)
+
+
+def from_occupancy_grid(width, height, resolution, origin, data, source='<OccupancyGrid>') -> OccupancyMap:
+    """From nav_msgs/OccupancyGrid fields: `data` row-major from the *bottom* row, values
+    -1..100; `origin` an (x, y, yaw) tuple or Rigid2D."""
+    try:
+        width, height, resolution = int(width), int(height), float(resolution)
+    except (TypeError, ValueError) as e:
+        raise MapError(f'{source}: bad width/height/resolution: {e}') from None
+    if width <= 0 or height <= 0:
+        raise MapError(f'{source}: empty grid ({width} x {height})')
+    if not math.isfinite(resolution) or resolution <= 0:
+        raise MapError(f'{source}: resolution must be a positive number, got {resolution}')
+    grid = np.asarray(data)
+    if grid.size != width * height:
+        raise MapError(f'{source}: data has {grid.size} cells, expected {width} x {height} = {width * height}')
+    grid = grid.astype(np.int16).reshape(height, width)
+    if grid.min() < -1 or grid.max() > 100:
+        raise MapError(f'{source}: cell values must lie in -1..100')
+    if not isinstance(origin, Rigid2D):
+        origin = Rigid2D(*[float(v) for v in origin])
+    return OccupancyMap(np.flipud(grid).astype(np.int8), resolution, origin, source)
+
+
+def _require(doc, key, path):
+    if key not in doc:
+        raise MapError(f'{path}: missing key {key!r}')
+    return doc[key]
+
+
+def load_map_yaml(path) -> OccupancyMap:
+    """Load a nav2_map_server map (YAML + PGM/PNG/...), with its semantics: `image`
+    relative to the YAML, `negate`, `occupied_thresh`, `free_thresh`, `mode`
+    (trinary | scale | raw), `origin` [x, y, yaw]; colour images are averaged to grey."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise MapError(f'{path}: map YAML not found')
+    try:
+        with open(path) as f:
+            doc = yaml.safe_load(f)
+    except (yaml.YAMLError, UnicodeDecodeError) as e:
+        raise MapError(f'{path}: not valid YAML: {e}') from None
+    if not isinstance(doc, dict):
+        raise MapError(f'{path}: expected a mapping of map parameters, got {type(doc).__name__}')
+
+    image_name = _require(doc, 'image', path)
+    if not isinstance(image_name, str) or not image_name:
+        raise MapError(f'{path}: key "image" must be a file name')
+    try:
+        resolution = float(_require(doc, 'resolution', path))
+        origin = [float(v) for v in _require(doc, 'origin', path)]
+        negate = int(doc.get('negate', 0))
+        occ_th = float(_require(doc, 'occupied_thresh', path))
+        free_th = float(_require(doc, 'free_thresh', path))
+    except (TypeError, ValueError) as e:
+        raise MapError(f'{path}: bad value: {e}') from None
+    mode = doc.get('mode', 'trinary')
+    if not math.isfinite(resolution) or resolution <= 0:
+        raise MapError(f'{path}: resolution must be a positive number, got {resolution}')
+    if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
+        raise MapError(f'{path}: origin must be [x, y, yaw], got {doc["origin"]}')
+    if not (0.0 <= free_th < occ_th <= 1.0):
+        raise MapError(f'{path}: need 0 <= free_thresh < occupied_thresh <= 1, '
+                       f'got free_thresh={free_th}, occupied_thresh={occ_th}')
+    if negate not in (0, 1):
+        raise MapError(f'{path}: negate must be 0 or 1, got {negate}')
+    if mode not in ('trinary', 'scale', 'raw'):
+        raise MapError(f'{path}: mode must be trinary, scale or raw, got {mode!r}')
+
+    image_path = image_name if os.path.isabs(image_name) else \
+        os.path.join(os.path.dirname(os.path.abspath(path)), image_name)
+    if not os.path.isfile(image_path):
+        raise MapError(f'{path}: image {image_path} not found')
+    image = cv2.imread(image_path, cv2.IMREAD_UNCHANGED)
+    if image is None or image.size == 0:
+        raise MapError(f'{path}: image {image_path} could not be read')
+    if image.dtype != np.uint8:   # 16-bit PGM/PNG: scale to 8 bits as map_server's 0..255 shade
+        image = (image.astype(np.float64) / np.iinfo(image.dtype).max * 255.0).round().astype(np.uint8)
+    alpha = None
+    if image.ndim == 3:
+        if image.shape[2] == 4:
+            alpha = image[:, :, 3]
+        shade = image[:, :, :3].mean(axis=2)   # nav2: colour channels averaged
+    else:
+        shade = image.astype(np.float64)
+
+    if mode == 'raw':
+        grid = shade.round().astype(np.int16)
+        grid[grid > 100] = UNKNOWN
+    else:
+        occ = shade / 255.0 if negate else (255.0 - shade) / 255.0
+        grid = np.full(shade.shape, UNKNOWN, dtype=np.int16)
+        grid[occ > occ_th] = OCCUPIED
+        grid[occ < free_th] = FREE
+        if mode == 'scale':
+            mid = (occ >= free_th) & (occ <= occ_th)
+            grid[mid] = np.rint(99.0 * (occ[mid] - free_th) / (occ_th - free_th)).astype(np.int16)
+            if alpha is not None:
+                grid[alpha < 255] = UNKNOWN
+    return OccupancyMap(grid.astype(np.int8), resolution, Rigid2D(*origin), path)
+
+
+def save_map_yaml(occupancy_map: OccupancyMap, yaml_path, image_name=None) -> None:
+    """Write a trinary nav2 map (PGM, 0 occupied / 254 free / 205 unknown) and its YAML, with
+    nav2's usual thresholds (205 reads as (255 - 205) / 255 = 0.196..., just above free_thresh)."""
+    yaml_path = os.fspath(yaml_path)
+    image_name = image_name or os.path.splitext(os.path.basename(yaml_path))[0] + '.pgm'
+    occ = occupancy_map.occupancy
+    img = np.full(occ.shape, 205, dtype=np.uint8)
+    img[occupancy_map.free] = 254
+    img[occupancy_map.occupied] = 0
+    cv2.imwrite(os.path.join(os.path.dirname(os.path.abspath(yaml_path)), image_name), img)
+    o = occupancy_map.origin
+    with open(yaml_path, 'w') as f:
+        yaml.safe_dump({'image': image_name, 'mode': 'trinary', 'resolution': occupancy_map.resolution,
+                        'origin': [float(o.x), float(o.y), float(o.yaw)], 'negate': 0,
+                        'occupied_thresh': 0.65, 'free_thresh': 0.196}, f, sort_keys=False)

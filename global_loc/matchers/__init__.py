@@ -1,0 +1,38 @@
+"""Matchers by name. Each is built once per map and reused (see base.Matcher)."""
+from __future__ import annotations
+
+from .base import Candidate, Cancelled, Matcher, MatchOptions, MethodError
+from .features import FeatureMatcher, surf_available
+from .template import ccoeff_matcher, sqdiff_matcher
+
+_FACTORIES = {
+    'template_ccoeff': ccoeff_matcher,
+    'template_sqdiff': sqdiff_matcher,
+    'features_orb': lambda m: FeatureMatcher(m, 'orb'),
+    'features_sift': lambda m: FeatureMatcher(m, 'sift'),
+    'features_akaze': lambda m: FeatureMatcher(m, 'akaze'),
+    'features_surf': lambda m: FeatureMatcher(m, 'surf'),
+}
+# 'features' is the thesis's choice where the build has it (SURF), ORB otherwise.
+ALIASES = {'features': lambda: 'features_surf' if surf_available() else 'features_orb'}
+
+
+def method_names() -> list[str]:
+    return sorted(_FACTORIES) + sorted(ALIASES)
+
+
+def resolve_method(name: str) -> str:
+    """Canonical matcher name for `name`; MethodError for an unknown one."""
+    if name in ALIASES:
+        return ALIASES[name]()
+    if name not in _FACTORIES:
+        raise MethodError(f'unknown method {name!r}; known: {", ".join(method_names())}')
+    return name
+
+
+def make_matcher(name: str, occupancy_map) -> Matcher:
+    return _FACTORIES[resolve_method(name)](occupancy_map)
+
+
+__all__ = ['Candidate', 'Cancelled', 'Matcher', 'MatchOptions', 'MethodError', 'make_matcher',
+           'method_names', 'resolve_method']

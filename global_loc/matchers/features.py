@@ -1,0 +1,104 @@
+"""Feature matching (thesis §2.2): keypoints and descriptors in the local map and the
+map image, FLANN nearest neighbours with Lowe's ratio test, and a RANSAC rigid fit
+(cv2.estimateAffinePartial2D). SURF where this OpenCV build has it (opencv-contrib
+with nonfree), else ORB, SIFT or AKAZE.
+
+Sequential RANSAC gives more than one hypothesis: after a fit, its inliers are removed
+and the rest fitted again. The score is the inlier count.
+"""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from ..local_grid import build_local_grid
+from ..pose import pose_from_match
+from .base import Candidate, Matcher, MethodError
+
+FLANN_INDEX_KDTREE = 1
+FLANN_INDEX_LSH = 6
+
+
+def surf_available() -> bool:
+    try:
+        cv2.xfeatures2d.SURF_create()
+        return True
+    except (AttributeError, cv2.error):
+        return False
+
+
+def make_detector(name: str):
+    """(detector, is_binary) for 'surf', 'orb', 'sift' or 'akaze'."""
+    if name == 'surf':
+        if not surf_available():
+            raise MethodError('SURF is not in this OpenCV build (it needs opencv-contrib built with '
+                              'OPENCV_ENABLE_NONFREE); use features_orb, features_sift or features_akaze')
+        return cv2.xfeatures2d.SURF_create(hessianThreshold=300), False
+    if name == 'orb':
+        return cv2.ORB_create(nfeatures=20000, scaleFactor=1.2, nlevels=4, edgeThreshold=15, patchSize=15,
+                              fastThreshold=10), True
+    if name == 'sift':
+        return cv2.SIFT_create(), False
+    if name == 'akaze':
+        return cv2.AKAZE_create(threshold=0.0005), True
+    raise MethodError(f'unknown feature detector {name!r}; known: surf, orb, sift, akaze')
+
+
+def feature_image(obstacles: np.ndarray) -> np.ndarray:
+    """Detectors want gradients, not one-pixel dots: blur the obstacle image slightly."""
+    return cv2.GaussianBlur(obstacles, (5, 5), 1.0)
+
+
+class FeatureMatcher(Matcher):
+    min_score = 8           # inliers
+    ratio = 0.8             # Lowe's ratio test
+    max_scale_error = 0.15  # both images share the resolution: scale must be ~1
+    max_hypotheses = 3
+
+    def __init__(self, occupancy_map, detector_name: str):
+        super().__init__(occupancy_map)
+        self.name = f'features_{detector_name}'
+        self.detector, binary = make_detector(detector_name)
+        self.keypoints, self.descriptors = self.detector.detectAndCompute(
+            feature_image(occupancy_map.surface_image()), None)
+        if binary:
+            index = dict(algorithm=FLANN_INDEX_LSH, table_number=6, key_size=12, multi_probe_level=1)
+        else:
+            index = dict(algorithm=FLANN_INDEX_KDTREE, trees=5)
+        self.flann = cv2.FlannBasedMatcher(index, dict(checks=64))
+        if self.descriptors is not None and len(self.keypoints) >= 2:
+            self.flann.add([self.descriptors])
+            self.flann.train()
+        self.map_points = np.float32([kp.pt for kp in self.keypoints]).reshape(-1, 2)
+
+    def match(self, points, options, progress=None):
+        local = build_local_grid(points, self.map.resolution, options.opening_kernel)
+        kps, desc = self.detector.detectAndCompute(feature_image(local.image), None)
+        if progress:
+            progress(0.3, 0.0)
+        if desc is None or len(kps) < 3 or len(self.keypoints) < 3:
+            return []
+        pairs = self.flann.knnMatch(desc, k=2)
+        good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < self.ratio * p[1].distance]
+        src = np.float32([kps[m.queryIdx].pt for m in good]).reshape(-1, 2)
+        dst = self.map_points[[m.trainIdx for m in good]].reshape(-1, 2)
+        candidates = []
+        while len(src) >= self.min_score and len(candidates) < self.max_hypotheses:
+            affine, inliers = cv2.estimateAffinePartial2D(src, dst, method=cv2.RANSAC,
+                                                          ransacReprojThreshold=3.0, maxIters=5000,
+                                                          confidence=0.995)
+            if affine is None:
+                break
+            inliers = inliers.ravel().astype(bool)
+            scale = math.hypot(affine[0, 0], affine[1, 0])
+            if inliers.sum() < self.min_score:
+                break
+            if abs(scale - 1.0) <= self.max_scale_error:
+                candidates.append(Candidate(pose_from_match(self.map, local, affine), float(inliers.sum())))
+            src, dst = src[~inliers], dst[~inliers]
+        if progress:
+            progress(1.0, candidates[0].score if candidates else 0.0)
+        candidates.sort(key=lambda c: -c.score)
+        return candidates

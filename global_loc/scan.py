@@ -1,0 +1,83 @@
+"""Laser scans: the LaserScan fields as a plain type, validated and turned into points.
+
+`Scan` carries exactly the sensor_msgs/LaserScan fields the method needs, so the ROS
+node, the CLI (JSON lines) and the simulator all build the same object.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+class ScanError(ValueError):
+    """A scan cannot be used (malformed fields, or no valid reading at all)."""
+
+
+@dataclass
+class Scan:
+    angle_min: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+    ranges: np.ndarray
+    stamp: float = 0.0      # seconds; the ROS node keeps the message stamp itself
+
+    @staticmethod
+    def from_dict(d: dict) -> 'Scan':
+        """From a JSON object with LaserScan field names; a no-return reading may be null."""
+        missing = [k for k in ('angle_min', 'angle_increment', 'range_min', 'range_max', 'ranges') if k not in d]
+        if missing:
+            raise ScanError(f'scan is missing field(s): {", ".join(missing)}')
+        try:
+            ranges = np.array([np.nan if r is None else r for r in d['ranges']], dtype=float)
+            return Scan(float(d['angle_min']), float(d['angle_increment']), float(d['range_min']),
+                        float(d['range_max']), ranges, float(d.get('stamp', 0.0)))
+        except (TypeError, ValueError) as e:
+            raise ScanError(f'scan has a non-numeric field: {e}') from None
+
+    def to_dict(self) -> dict:
+        return {'angle_min': self.angle_min, 'angle_increment': self.angle_increment,
+                'range_min': self.range_min, 'range_max': self.range_max,
+                'ranges': [None if not math.isfinite(r) else round(float(r), 4) for r in self.ranges]}
+
+
+@dataclass
+class ScanPoints:
+    """Valid returns of one scan as points in the laser frame (x forward, y left)."""
+    points: np.ndarray                      # (N, 2) metres
+    range_max: float
+    num_beams: int
+    dropped: dict = field(default_factory=dict)   # reason -> count of readings dropped
+
+
+def scan_to_points(scan: Scan) -> ScanPoints:
+    """Drop NaN, +-inf and out-of-[range_min, range_max] readings (counted per reason);
+    raise ScanError on malformed fields or when nothing valid is left."""
+    for name in ('angle_min', 'angle_increment', 'range_min', 'range_max'):
+        if not math.isfinite(getattr(scan, name)):
+            raise ScanError(f'scan field {name} is not finite: {getattr(scan, name)}')
+    if scan.angle_increment == 0:
+        raise ScanError('scan angle_increment is 0')
+    if not (0 <= scan.range_min < scan.range_max):
+        raise ScanError(f'need 0 <= range_min < range_max, got {scan.range_min}, {scan.range_max}')
+    ranges = np.asarray(scan.ranges, dtype=float).ravel()
+    if ranges.size == 0:
+        raise ScanError('scan has no readings')
+    angles = scan.angle_min + scan.angle_increment * np.arange(ranges.size)
+    nan = np.isnan(ranges)
+    inf = np.isinf(ranges)
+    finite = ~(nan | inf)
+    low = finite & (ranges < scan.range_min)
+    # A reading at range_max is the usual "no return" (CARMEN, many drivers): drop it too.
+    high = finite & (ranges >= scan.range_max)
+    ok = finite & ~low & ~high
+    dropped = {'nan': int(nan.sum()), 'inf': int(inf.sum()),
+               'below_range_min': int(low.sum()), 'at_or_above_range_max': int(high.sum())}
+    if not ok.any():
+        raise ScanError(f'scan has no valid reading among {ranges.size} '
+                        f'(dropped: {", ".join(f"{k}={v}" for k, v in dropped.items() if v)})')
+    r, a = ranges[ok], angles[ok]
+    pts = np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+    return ScanPoints(pts, float(scan.range_max), int(ranges.size), dropped)

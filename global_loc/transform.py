@@ -1,0 +1,62 @@
+"""2-D rigid transforms: the one place where frame changes are computed.
+
+`Rigid2D(x, y, yaw)` is the pose of a child frame in a parent frame; `a * b` composes
+(parent_T_child * child_T_grandchild), `inverse()` inverts, `apply()` maps points.
+Everything else in global_loc (pixel frames, matches, laser mounting) composes these
+instead of writing out trigonometry.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def normalize_angle(a):
+    """Wrap an angle (scalar or array) to [-pi, pi)."""
+    return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi if isinstance(a, np.ndarray) \
+        else (a + math.pi) % (2 * math.pi) - math.pi
+
+
+@dataclass(frozen=True)
+class Rigid2D:
+    x: float = 0.0
+    y: float = 0.0
+    yaw: float = 0.0
+
+    @staticmethod
+    def from_matrix(m) -> 'Rigid2D':
+        """From a 3x3 homogeneous matrix whose linear part is a rotation (or a rotation
+        times a positive scale, which is divided out)."""
+        m = np.asarray(m, dtype=float)
+        return Rigid2D(float(m[0, 2]), float(m[1, 2]), math.atan2(m[1, 0], m[0, 0]))
+
+    def matrix(self) -> np.ndarray:
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        return np.array([[c, -s, self.x], [s, c, self.y], [0.0, 0.0, 1.0]])
+
+    def __mul__(self, other: 'Rigid2D') -> 'Rigid2D':
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        return Rigid2D(self.x + c * other.x - s * other.y,
+                       self.y + s * other.x + c * other.y,
+                       normalize_angle(self.yaw + other.yaw))
+
+    def inverse(self) -> 'Rigid2D':
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        return Rigid2D(-(c * self.x + s * self.y), s * self.x - c * self.y, -self.yaw)
+
+    def apply(self, points) -> np.ndarray:
+        """Map an (N, 2) array of points from the child frame to the parent frame."""
+        p = np.asarray(points, dtype=float).reshape(-1, 2)
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        return np.stack([self.x + c * p[:, 0] - s * p[:, 1],
+                         self.y + s * p[:, 0] + c * p[:, 1]], axis=1)
+
+    def distance_to(self, other: 'Rigid2D') -> tuple[float, float]:
+        """(position error in metres, absolute heading error in radians)."""
+        return (math.hypot(self.x - other.x, self.y - other.y),
+                abs(normalize_angle(self.yaw - other.yaw)))
+
+    def as_tuple(self) -> tuple[float, float, float]:
+        return (self.x, self.y, self.yaw)
