@@ -45,15 +45,19 @@ def rotation_px(angle_deg: float, center) -> np.ndarray:
 
 def pose_from_match(occupancy_map: OccupancyMap, local: LocalGrid, local_to_map_px) -> Rigid2D:
     """Laser pose in the map frame, given the pixel affine from `local`'s image to the
-    map image. A uniform scale in the affine (feature matching) is divided out."""
+    map image. A uniform scale in the affine (feature matching) is divided out about the
+    laser pixel: the laser lands where the affine puts it, heading from its rotation."""
     a = np.asarray(local_to_map_px, dtype=float)
     if a.shape == (2, 3):
         a = np.vstack([a, [0.0, 0.0, 1.0]])
     scale = math.sqrt(abs(np.linalg.det(a[:2, :2])))
     if scale <= 0:
         raise ValueError('degenerate pixel affine')
+    laser = np.array([local.laser_px[0], local.laser_px[1], 1.0])
+    target = a @ laser
     a = a.copy()
     a[:2, :2] /= scale
+    a[:2, 2] = target[:2] - a[:2, :2] @ laser[:2]
     g_map = pixel_to_grid_matrix(occupancy_map.height, occupancy_map.resolution)
     g_local = pixel_to_grid_matrix(local.height, local.resolution)
     grid_T_localgrid = Rigid2D.from_matrix(g_map @ a @ np.linalg.inv(g_local))

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from .map_io import OccupancyMap
-from .scan import Scan
+from .scan import Scan, ScanPoints
 from .transform import Rigid2D
 
 
@@ -65,3 +65,12 @@ def sample_free_poses(occupancy_map: OccupancyMap, n: int, rng, clearance: float
     xy = occupancy_map.pixel_to_world(np.stack([cols[idx], rows[idx]], axis=1).astype(float))
     yaws = rng.uniform(-math.pi, math.pi, n)
     return [Rigid2D(float(x), float(y), float(a)) for (x, y), a in zip(xy, yaws)]
+
+
+def points_cut_from_map(occupancy_map: OccupancyMap, laser_pose: Rigid2D, radius: float) -> ScanPoints:
+    """The map's wall-surface cells within `radius` of the pose, in the laser frame: the
+    thesis's "local map cut from the global map" (§4.1), an upper bound for any matcher."""
+    rows, cols = np.nonzero(occupancy_map.surface_image())
+    xy = occupancy_map.pixel_to_world(np.stack([cols, rows], axis=1).astype(float))
+    near = np.hypot(xy[:, 0] - laser_pose.x, xy[:, 1] - laser_pose.y) < radius
+    return ScanPoints(laser_pose.inverse().apply(xy[near]), float(radius), int(near.sum()))

@@ -1,0 +1,46 @@
+"""The CLI end to end in real subprocesses: simulate scans, localize them, a bad line."""
+import json
+import os
+import subprocess
+import sys
+
+from conftest import OFFICE_YAML
+
+
+def run_cli(*args, stdin=None):
+    return subprocess.run([sys.executable, '-m', 'global_loc', *args], input=stdin, capture_output=True,
+                          text=True, timeout=300)
+
+
+def test_cli_localizes_simulated_scans_and_reports_a_bad_line(tmp_path):
+    sim = run_cli('simulate', '--map', OFFICE_YAML, '--count', '3', '--seed', '3')
+    assert sim.returncode == 0, sim.stderr
+    lines = sim.stdout.splitlines()
+    assert len(lines) == 3 and 'truth' in json.loads(lines[0])
+    bad = json.loads(lines[0])
+    bad['ranges'] = [None] * len(bad['ranges'])
+    scans = tmp_path / 'scans.jsonl'
+    scans.write_text('\n'.join([lines[0], 'not json', json.dumps(bad), lines[1], lines[2]]) + '\n')
+    plot = tmp_path / 'out.png'
+    out = run_cli('localize', '--map', OFFICE_YAML, '--scans', str(scans), '--method', 'template_ccoeff',
+                  '--plot', str(plot))
+    assert out.returncode == 0, out.stderr
+    rows = [json.loads(line) for line in out.stdout.splitlines()]
+    assert len(rows) == 5
+    assert 'error' in rows[1] and 'line 2' in rows[1]['error']
+    assert 'no valid reading' in rows[2]['error']
+    good = [rows[0], rows[3], rows[4]]
+    for row in good:
+        assert {'x', 'y', 'yaw', 'score', 'success', 'time_s', 'method', 'hypotheses'} <= set(row)
+        assert row['method'] == 'template_ccoeff'
+    assert sum(r['error_xy'] < 0.2 and r['error_yaw_deg'] < 5 for r in good) >= 2
+    assert os.path.getsize(plot) > 10000
+
+
+def test_cli_unknown_method_and_missing_map_exit_with_a_message(tmp_path):
+    scans = tmp_path / 's.jsonl'
+    scans.write_text('')
+    out = run_cli('localize', '--scans', str(scans), '--method', 'magic')
+    assert out.returncode == 2 and 'unknown method' in out.stderr
+    out = run_cli('localize', '--scans', str(scans), '--map', str(tmp_path / 'no.yaml'))
+    assert out.returncode == 2 and 'not found' in out.stderr

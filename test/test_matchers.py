@@ -1,0 +1,80 @@
+"""Each matcher recovers known poses: from local maps cut from the map (thesis §4.1) and,
+for the rotated template, from scans ray-cast in the map."""
+import math
+
+import numpy as np
+import pytest
+
+from global_loc.localizer import Localizer, LocalizerConfig, distinct, pose_error
+from global_loc.matchers import Candidate, MatchOptions, MethodError, method_names, resolve_method
+from global_loc.matchers.features import make_detector, surf_available
+from global_loc.raycast import points_cut_from_map, simulate_scan
+from global_loc.scan import ScanError
+from global_loc.transform import Rigid2D
+
+# Distinctive places of the office map (furniture in view), with headings off the grid.
+KNOWN_POSES = [Rigid2D(12.0, 8.0, -2.0), Rigid2D(20.0, 12.5, 2.5)]
+
+
+@pytest.fixture(scope='module')
+def localizer(office_map):
+    return Localizer(office_map)
+
+
+@pytest.mark.parametrize('method', ['template_ccoeff', 'template_sqdiff', 'features_orb', 'features_sift'])
+@pytest.mark.parametrize('truth', KNOWN_POSES, ids=str)
+def test_matcher_recovers_pose_of_local_map_cut_from_the_map(localizer, method, truth):
+    points = points_cut_from_map(localizer.map, truth, radius=6.0)
+    candidates = localizer.matcher(method).match(points, MatchOptions())
+    assert candidates, f'{method} found nothing'
+    d, a = pose_error(candidates[0].laser_pose, truth)
+    assert d < 0.2 and a < 5.0, f'{method}: error {d:.2f} m, {a:.1f} deg'
+
+
+# The thesis method is right only ~60-90% of the time (see the benchmark); these are two
+# places where it is, so a regression in the pipeline shows here.
+@pytest.mark.parametrize('truth', [Rigid2D(3.0, 4.0, 0.7), Rigid2D(18.0, 4.5, -2.2)], ids=str)
+def test_rotated_template_localizes_a_raycast_270_deg_scan(localizer, truth):
+    scan = simulate_scan(localizer.map, truth, 270.0, 541, 20.0, noise_std=0.01, dropout=0.02,
+                         rng=np.random.default_rng(7))
+    result = localizer.localize(scan, method='template_ccoeff')
+    d, a = pose_error(result.pose, truth)
+    assert d < 0.2 and a < 5.0, f'error {d:.2f} m, {a:.1f} deg'
+    assert result.success and result.method == 'template_ccoeff'
+    assert result.hypotheses[0].pose == result.pose
+    assert result.dropped['nan'] > 0          # the dropouts were seen and dropped
+
+
+def test_result_pose_is_the_base_when_the_laser_is_mounted_forward(office_map):
+    truth_base = Rigid2D(3.0, 4.0, 0.7)
+    mount = Rigid2D(0.2, 0.0, 0.0)
+    scan = simulate_scan(office_map, truth_base * mount, 270.0, 541, 20.0, rng=np.random.default_rng(1))
+    result = Localizer(office_map, LocalizerConfig(base_T_laser=mount)).localize(scan)
+    d, a = pose_error(result.pose, truth_base)
+    assert d < 0.2 and a < 5.0
+
+
+def test_hypotheses_are_distinct_in_position_or_heading():
+    c = [Candidate(Rigid2D(0, 0, 0), 1.0), Candidate(Rigid2D(0.1, 0, 0.05), 0.9),
+         Candidate(Rigid2D(0.1, 0, math.pi), 0.8), Candidate(Rigid2D(5, 0, 0), 0.7)]
+    kept = distinct(c, 5, 1.0, math.radians(20))
+    assert [k.score for k in kept] == [1.0, 0.8, 0.7]
+
+
+def test_unknown_method_and_missing_surf_are_clear_errors(localizer):
+    with pytest.raises(MethodError, match='unknown method .*known: .*template_ccoeff'):
+        resolve_method('magic')
+    assert 'features' in method_names()
+    if not surf_available():
+        with pytest.raises(MethodError, match='SURF is not in this OpenCV build.*features_orb'):
+            make_detector('surf')
+        assert resolve_method('features') == 'features_orb'
+
+
+def test_bad_scan_and_bad_angle_step_raise_before_matching(localizer):
+    scan = simulate_scan(localizer.map, Rigid2D(3.0, 4.0, 0.0), 270.0, 541, 20.0)
+    with pytest.raises(ValueError, match='angle step'):
+        localizer.localize(scan, angle_step_deg=-5)
+    scan.ranges[:] = np.nan
+    with pytest.raises(ScanError):
+        localizer.localize(scan)

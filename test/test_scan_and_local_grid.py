@@ -1,0 +1,81 @@
+import math
+
+import numpy as np
+import pytest
+
+from global_loc.local_grid import build_local_grid, close_obstacles, crop_to_obstacles, rasterize
+from global_loc.scan import Scan, ScanError, ScanPoints, scan_to_points
+
+
+def make_scan(ranges, range_min=0.1, range_max=10.0):
+    return Scan(-math.pi / 2, math.pi / 2, range_min, range_max, np.array(ranges, dtype=float))
+
+
+def test_invalid_readings_are_dropped_and_counted():
+    pts = scan_to_points(make_scan([1.0, np.nan, np.inf, 0.05, 10.0, -np.inf, 2.0]))
+    assert len(pts.points) == 2
+    assert pts.dropped == {'nan': 1, 'inf': 2, 'below_range_min': 1, 'at_or_above_range_max': 1}
+
+
+def test_points_are_in_the_laser_frame_counter_clockwise_from_angle_min():
+    pts = scan_to_points(make_scan([1.0, 2.0, 3.0])).points
+    assert pts == pytest.approx(np.array([[0.0, -1.0], [2.0, 0.0], [0.0, 3.0]]), abs=1e-12)
+
+
+@pytest.mark.parametrize('ranges', [[], [np.nan, np.inf, -np.inf], [0.0, 0.01], [50.0]])
+def test_empty_or_all_invalid_scan_is_a_clear_error(ranges):
+    with pytest.raises(ScanError, match='no (valid )?reading'):
+        scan_to_points(make_scan(ranges))
+
+
+@pytest.mark.parametrize('field, value, fragment', [
+    ('angle_increment', 0.0, 'angle_increment is 0'),
+    ('range_max', float('nan'), 'not finite'),
+    ('range_min', 20.0, 'range_min < range_max'),
+])
+def test_malformed_scan_fields_are_a_clear_error(field, value, fragment):
+    scan = make_scan([1.0, 2.0, 3.0])
+    setattr(scan, field, value)
+    with pytest.raises(ScanError, match=fragment):
+        scan_to_points(scan)
+
+
+def test_scan_from_json_with_null_ranges_and_missing_fields():
+    s = Scan.from_dict({'angle_min': 0, 'angle_increment': 0.1, 'range_min': 0, 'range_max': 5,
+                        'ranges': [1.0, None, 2.0]})
+    assert np.isnan(s.ranges[1])
+    with pytest.raises(ScanError, match='missing field'):
+        Scan.from_dict({'angle_min': 0})
+    with pytest.raises(ScanError, match='non-numeric'):
+        Scan.from_dict({'angle_min': 'a', 'angle_increment': 0.1, 'range_min': 0, 'range_max': 5, 'ranges': []})
+
+
+def test_rasterize_puts_the_laser_at_the_centre_with_side_twice_max_range():
+    pts = ScanPoints(np.array([[1.0, 0.0], [0.0, 0.5]]), range_max=2.0, num_beams=2)
+    grid = rasterize(pts, 0.1)
+    assert grid.image.shape == (41, 41)
+    assert grid.laser_px == (20.0, 20.0)
+    assert grid.image[20, 30] == 255      # 1 m ahead: 10 columns right
+    assert grid.image[15, 20] == 255      # 0.5 m left (+y): 5 rows up
+    assert grid.image.sum() == 2 * 255
+
+
+def test_crop_remembers_offsets_so_the_laser_pixel_moves():
+    pts = ScanPoints(np.array([[1.0, 0.0], [1.0, 0.5]]), range_max=2.0, num_beams=2)
+    crop = crop_to_obstacles(rasterize(pts, 0.1))
+    assert crop.image.shape == (6, 1)
+    assert crop.crop_offset == (30, 15)
+    assert crop.laser_px == (20.0 - 30, 20.0 - 15)
+
+
+def test_opening_joins_a_dotted_wall_into_a_line_and_zero_kernel_is_off():
+    # Returns every second cell along a wall, as a far wall gives at grazing angles.
+    ys = np.arange(-1.0, 1.0, 0.2)
+    pts = ScanPoints(np.stack([np.full_like(ys, 1.5), ys], axis=1), range_max=2.0, num_beams=len(ys))
+    raw = build_local_grid(pts, 0.1, opening_kernel=0)
+    joined = build_local_grid(pts, 0.1, opening_kernel=3)
+    column = raw.image[:, int(raw.laser_px[0] + 15)]
+    assert (column[column.nonzero()[0].min():column.nonzero()[0].max() + 1] == 0).any()   # gaps
+    column = joined.image[:, int(joined.laser_px[0] + 15)]
+    assert (column[column.nonzero()[0].min():column.nonzero()[0].max() + 1] == 255).all()  # a line
+    assert close_obstacles(raw, 0).image is raw.image
