@@ -57,7 +57,7 @@ def localize_main(args) -> int:
             if truth is not None and result.pose is not None:
                 t = Rigid2D(truth['x'], truth['y'], truth['yaw'])
                 d, a = pose_error(result.pose, t)
-                out.update(error_xy=round(d, 4), error_yaw_deg=round(a, 3))
+                out.update(truth=_pose_dict(t), error_xy=round(d, 4), error_yaw_deg=round(a, 3))
             print(json.dumps(out), flush=True)
             if args.plot:
                 stem, ext = os.path.splitext(args.plot)
