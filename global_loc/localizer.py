@@ -91,10 +91,11 @@ class Localizer:
         return self._matchers[name]
 
     def localize(self, scan: Scan, method: Optional[str] = None, angle_step_deg: Optional[float] = None,
-                 progress: Optional[ProgressFn] = None) -> LocalizationResult:
+                 progress: Optional[ProgressFn] = None, base_T_laser: Optional[Rigid2D] = None
+                 ) -> LocalizationResult:
         """Localize one scan. Raises ScanError for an unusable scan, MethodError for an
         unknown method and Cancelled if `progress` raises it; otherwise returns a result,
-        successful or not."""
+        successful or not. `base_T_laser` overrides the config's laser mounting."""
         cfg = self.config
         t0 = time.perf_counter()
         points = scan_to_points(scan)
@@ -106,7 +107,7 @@ class Localizer:
         candidates = matcher.match(points, options, progress)
         best = distinct(candidates, cfg.num_hypotheses, cfg.hypothesis_min_distance,
                         math.radians(cfg.hypothesis_min_angle_deg))
-        laser_T_base = cfg.base_T_laser.inverse()
+        laser_T_base = (base_T_laser or cfg.base_T_laser).inverse()
         hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in best]
         elapsed = time.perf_counter() - t0
         result = LocalizationResult(False, '', matcher.name, time_s=elapsed, dropped=points.dropped,

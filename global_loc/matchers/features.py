@@ -42,6 +42,9 @@ def make_detector(name: str):
     if name == 'sift':
         return cv2.SIFT_create(), False
     if name == 'akaze':
+        if not hasattr(cv2, 'AKAZE_create'):   # OpenCV 5 moved AKAZE out of the main modules
+            raise MethodError(f'AKAZE is not in this OpenCV build ({cv2.__version__}); '
+                              'use features_orb or features_sift')
         return cv2.AKAZE_create(threshold=0.0005), True
     raise MethodError(f'unknown feature detector {name!r}; known: surf, orb, sift, akaze')
 

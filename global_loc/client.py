@@ -1,0 +1,101 @@
+"""`ros2 run global_loc test_global_loc`: send one Localize goal and print what happens.
+
+Exit code 0 when the server localized the robot, 1 when the goal ended without a pose
+it is sure of (the message says why), 2 when no server answered.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+
+import rclpy
+from action_msgs.msg import GoalStatus
+from global_loc_interfaces.action import Localize
+from rclpy.action import ActionClient
+from rclpy.executors import ExternalShutdownException
+
+from .ros_convert import pose_from_msg
+
+STATUS = {GoalStatus.STATUS_SUCCEEDED: 'succeeded', GoalStatus.STATUS_ABORTED: 'aborted',
+          GoalStatus.STATUS_CANCELED: 'canceled'}
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(prog='test_global_loc', description='Ask global_loc server where the robot is.')
+    parser.add_argument('--method', default='', help="matcher name (default: the server's)")
+    parser.add_argument('--angle-step', type=float, default=0.0, help="Δα in degrees (default: the server's)")
+    parser.add_argument('--timeout', type=float, default=0.0, help="seconds to wait for a scan (default: the server's)")
+    parser.add_argument('--no-publish', action='store_true', help='do not publish the pose on /initialpose')
+    parser.add_argument('--server-timeout', type=float, default=10.0, help='seconds to wait for the server')
+    parser.add_argument('--cancel-after', type=float, default=0.0, help='cancel the goal after this many seconds')
+    parser.add_argument('--action', default='localize', help='action name')
+    return parser.parse_args(argv)
+
+
+def fmt_pose(p) -> str:
+    return f'x={p.x:.3f} y={p.y:.3f} yaw={math.degrees(p.yaw):.1f} deg'
+
+
+def run(node, args) -> int:
+    client = ActionClient(node, Localize, args.action)
+    if not client.wait_for_server(timeout_sec=args.server_timeout):
+        print(f'error: no global_loc server answered on action "{args.action}" within {args.server_timeout:.0f} s '
+              f'(is `ros2 run global_loc server` running, with the same ROS_DOMAIN_ID?)', file=sys.stderr)
+        return 2
+    goal = Localize.Goal(method=args.method, angle_step_deg=args.angle_step, timeout_s=args.timeout,
+                         publish_initialpose=not args.no_publish)
+    last_stage = ['']
+
+    def on_feedback(fb):
+        f = fb.feedback
+        if f.stage != last_stage[0] or f.progress >= 0.95:
+            print(f'[{f.progress * 100:5.1f}%] {f.stage}  best score {f.best_score:.3f}', flush=True)
+            last_stage[0] = f.stage
+
+    send = client.send_goal_async(goal, feedback_callback=on_feedback)
+    rclpy.spin_until_future_complete(node, send)
+    handle = send.result()
+    if handle is None or not handle.accepted:
+        print('error: the server rejected the goal', file=sys.stderr)
+        return 1
+    result_future = handle.get_result_async()
+    if args.cancel_after > 0:
+        deadline = time.monotonic() + args.cancel_after
+        while not result_future.done() and time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.05)
+        if not result_future.done():
+            print(f'canceling after {args.cancel_after:.1f} s', flush=True)
+            rclpy.spin_until_future_complete(node, handle.cancel_goal_async())
+    rclpy.spin_until_future_complete(node, result_future)
+    response = result_future.result()
+    result = response.result
+    status = STATUS.get(response.status, str(response.status))
+    if len(result.hypotheses.poses):
+        print(f'pose:       {fmt_pose(pose_from_msg(result.pose.pose.pose))}  (frame {result.pose.header.frame_id})')
+        print(f'score:      {result.score:.3f}   confidence: {result.confidence:.2f}   time: {result.elapsed_s:.2f} s')
+        for i, (p, s) in enumerate(zip(result.hypotheses.poses, result.hypothesis_scores)):
+            print(f'  hypothesis {i + 1}: {fmt_pose(pose_from_msg(p))}  score {s:.3f}')
+    print(f'{status}: {result.message}')
+    return 0 if response.status == GoalStatus.STATUS_SUCCEEDED and result.success else 1
+
+
+def main(argv=None):
+    args = parse_args(sys.argv[1:] if argv is None else argv)
+    rclpy.init()
+    node = rclpy.create_node('test_global_loc')
+    code = 1
+    try:
+        code = run(node, args)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        print('interrupted', file=sys.stderr)
+    finally:
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    sys.exit(code)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,47 @@
+"""A test helper process: publishes LaserScans ray-cast at a known pose on a map.
+
+usage: python scan_publisher.py MAP_YAML X Y YAW [RATE_HZ]
+"""
+import sys
+
+import numpy as np
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from sensor_msgs.msg import LaserScan
+
+from global_loc.map_io import load_map_yaml
+from global_loc.raycast import simulate_scan
+from global_loc.transform import Rigid2D
+
+
+def main():
+    map_yaml, x, y, yaw = sys.argv[1], *map(float, sys.argv[2:5])
+    rate = float(sys.argv[5]) if len(sys.argv) > 5 else 5.0
+    occupancy_map = load_map_yaml(map_yaml)
+    rng = np.random.default_rng(0)
+    rclpy.init()
+    node = rclpy.create_node('test_scan_publisher')
+    pub = node.create_publisher(LaserScan, '/scan', 5)
+
+    def tick():
+        scan = simulate_scan(occupancy_map, Rigid2D(x, y, yaw), 270.0, 541, 20.0, noise_std=0.01, dropout=0.02, rng=rng)
+        msg = LaserScan(angle_min=scan.angle_min, angle_max=scan.angle_min + scan.angle_increment * (len(scan.ranges) - 1),
+                        angle_increment=scan.angle_increment, range_min=scan.range_min, range_max=scan.range_max,
+                        ranges=[float(r) for r in scan.ranges])
+        msg.header.frame_id = 'laser'
+        msg.header.stamp = node.get_clock().now().to_msg()
+        pub.publish(msg)
+
+    node.create_timer(1.0 / rate, tick)
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,175 @@
+"""The action server, the client and /initialpose in separate processes over real DDS."""
+import math
+import re
+import threading
+import time
+
+import pytest
+
+from conftest import OFFICE_YAML
+from ros_processes import isolated_env, run_client, start_scan_publisher, start_server
+
+TRUTH = (3.0, 4.0, 0.7)     # a place the default (thesis) matcher gets right; see test_matchers
+
+
+def parse_pose(stdout: str):
+    m = re.search(r'pose:\s+x=(\S+) y=(\S+) yaw=(\S+) deg', stdout)
+    assert m, stdout
+    return float(m.group(1)), float(m.group(2)), math.radians(float(m.group(3)))
+
+
+def assert_close(pose, truth):
+    assert math.hypot(pose[0] - truth[0], pose[1] - truth[1]) < 0.2, (pose, truth)
+    assert abs((pose[2] - truth[2] + math.pi) % (2 * math.pi) - math.pi) < math.radians(5), (pose, truth)
+
+
+class InitialPoseListener:
+    """An rclpy subscriber to /initialpose in this test process, spun in a thread."""
+
+    def __init__(self, env):
+        import rclpy
+        from geometry_msgs.msg import PoseWithCovarianceStamped
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=int(env['ROS_DOMAIN_ID']))
+        self.node = rclpy.create_node('initialpose_listener', context=self.context)
+        self.messages = []
+        self.node.create_subscription(PoseWithCovarianceStamped, '/initialpose', self.messages.append,
+                                      QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+
+    def wait_for(self, count, timeout=10.0):
+        deadline = time.monotonic() + timeout
+        while len(self.messages) < count and time.monotonic() < deadline:
+            time.sleep(0.05)
+        return self.messages
+
+    def close(self):
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+@pytest.fixture(scope='module')
+def system(tmp_path_factory):
+    """Server + scan publisher at TRUTH + an /initialpose listener, on a private domain."""
+    import os
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    logs = tmp_path_factory.mktemp('ros')
+    env = isolated_env()
+    listener = InitialPoseListener(env)
+    server = start_server(env, logs / 'server.log', 'scan_timeout_s:=5.0')
+    publisher = start_scan_publisher(env, logs / 'publisher.log', OFFICE_YAML, TRUTH)
+    yield env, server, listener
+    publisher.stop()
+    listener.close()
+    assert server.stop() == 0, f'server did not exit cleanly on SIGTERM:\n{server.output()}'
+
+
+def test_client_localizes_and_initialpose_carries_the_same_pose(system):
+    env, server, listener = system
+    before = len(listener.messages)
+    out = run_client(env, '--timeout', '10')
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert 'succeeded: localized' in out.stdout
+    assert 'waiting_for_scan' in out.stdout and 'matching' in out.stdout      # feedback arrived
+    pose = parse_pose(out.stdout)
+    assert_close(pose, TRUTH)
+    msgs = listener.wait_for(before + 1)
+    assert len(msgs) == before + 1, 'nothing on /initialpose'
+    msg = msgs[-1]
+    assert msg.header.frame_id == 'map'
+    q = msg.pose.pose.orientation
+    assert math.isclose(q.x ** 2 + q.y ** 2 + q.z ** 2 + q.w ** 2, 1.0, rel_tol=1e-9)
+    published = (msg.pose.pose.position.x, msg.pose.pose.position.y, 2 * math.atan2(q.z, q.w))
+    assert_close(published, pose)
+    assert all(math.isfinite(c) for c in msg.pose.covariance)
+    assert msg.pose.covariance[0] > 0 and msg.pose.covariance[7] > 0 and msg.pose.covariance[35] > 0
+
+
+def test_no_publish_goal_leaves_initialpose_alone(system):
+    env, server, listener = system
+    before = len(listener.messages)
+    out = run_client(env, '--no-publish')
+    assert out.returncode == 0, out.stdout + out.stderr
+    time.sleep(1.0)
+    assert len(listener.messages) == before
+
+
+def test_unknown_method_aborts_and_the_server_keeps_serving(system):
+    env, server, _ = system
+    out = run_client(env, '--method', 'magic')
+    assert out.returncode == 1
+    assert "aborted: unknown method 'magic'" in out.stdout
+    assert run_client(env).returncode == 0
+
+
+def test_cancel_mid_search_ends_the_goal_quickly_and_the_server_keeps_serving(system):
+    env, server, _ = system
+    t0 = time.monotonic()
+    # Δα = 0.5 deg: 720 rotations, far longer than the 1.5 s before the cancel.
+    out = run_client(env, '--angle-step', '0.5', '--cancel-after', '1.5')
+    elapsed = time.monotonic() - t0
+    assert 'canceled: canceled' in out.stdout, out.stdout + out.stderr
+    assert out.returncode == 1
+    assert elapsed < 15, f'cancel took the client {elapsed:.1f} s in all'
+    assert run_client(env).returncode == 0
+
+
+def test_goal_while_busy_is_aborted_with_a_reason(system):
+    env, server, _ = system
+    import subprocess
+    from ros_processes import ros2
+    started = server.output().count('matching a scan')
+    slow = subprocess.Popen([ros2(), 'run', 'global_loc', 'test_global_loc', '--angle-step', '0.5',
+                             '--cancel-after', '8'], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 20
+        while server.output().count('matching a scan') == started and time.monotonic() < deadline:
+            time.sleep(0.1)
+        busy = run_client(env)
+        assert busy.returncode == 1
+        assert 'aborted: busy: another goal is running' in busy.stdout
+    finally:
+        slow_out, _ = slow.communicate(timeout=60)
+    assert 'succeeded: localized' in slow_out or 'canceled: canceled' in slow_out, slow_out   # the first goal ran on
+
+
+def test_no_scan_within_timeout_aborts_then_next_goal_works(tmp_path):
+    env = isolated_env()
+    server = start_server(env, tmp_path / 'server.log')
+    try:
+        out = run_client(env, '--timeout', '1.0')
+        assert out.returncode == 1
+        assert 'aborted: no scan on /scan within 1.0 s' in out.stdout
+        publisher = start_scan_publisher(env, tmp_path / 'pub.log', OFFICE_YAML, TRUTH)
+        try:
+            out = run_client(env, '--timeout', '10')
+            assert out.returncode == 0, out.stdout
+        finally:
+            publisher.stop()
+    finally:
+        assert server.stop() == 0
+
+
+def test_missing_map_file_server_starts_and_aborts_goals_with_the_reason(tmp_path):
+    env = isolated_env()
+    server = start_server(env, tmp_path / 'server.log', f'map_yaml:={tmp_path}/nothere.yaml')
+    try:
+        assert 'map not loaded' in server.output()
+        for _ in range(2):    # and it keeps answering
+            out = run_client(env)
+            assert out.returncode == 1
+            assert 'aborted: map not loaded:' in out.stdout and 'nothere.yaml: map YAML not found' in out.stdout
+    finally:
+        assert server.stop() == 0
+
+
+def test_client_without_server_says_so(tmp_path):
+    env = isolated_env()
+    out = run_client(env, '--server-timeout', '1')
+    assert out.returncode == 2
+    assert 'no global_loc server answered' in out.stderr
