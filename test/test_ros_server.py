@@ -173,3 +173,39 @@ def test_client_without_server_says_so(tmp_path):
     out = run_client(env, '--server-timeout', '1')
     assert out.returncode == 2
     assert 'no global_loc server answered' in out.stderr
+
+
+def test_map_from_occupancy_grid_topic(tmp_path):
+    """use_map_topic: the map arrives as a transient-local OccupancyGrid, like nav2's map_server."""
+    import numpy as np
+    import rclpy
+    from nav_msgs.msg import OccupancyGrid
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from global_loc.map_io import load_map_yaml
+    env = isolated_env()
+    m = load_map_yaml(OFFICE_YAML)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']))
+    node = rclpy.create_node('test_map_server', context=context)
+    pub = node.create_publisher(OccupancyGrid, '/map', QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                                                   durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    msg = OccupancyGrid()
+    msg.header.frame_id = 'map'
+    msg.info.resolution, msg.info.width, msg.info.height = m.resolution, m.width, m.height
+    msg.info.origin.position.x, msg.info.origin.position.y = m.origin.x, m.origin.y
+    msg.info.origin.orientation.w = 1.0
+    msg.data = np.flipud(m.occupancy).astype(np.int8).ravel().tolist()
+    pub.publish(msg)     # before the server exists: transient local delivers it late
+    server = start_server(env, tmp_path / 'server.log', 'use_map_topic:=true')
+    publisher = start_scan_publisher(env, tmp_path / 'pub.log', OFFICE_YAML, TRUTH)
+    try:
+        server.wait_for_output('map OccupancyGrid on map: 520 x 360 cells')
+        out = run_client(env, '--timeout', '10')
+        assert out.returncode == 0, out.stdout + server.output()
+        assert_close(parse_pose(out.stdout), TRUTH)
+    finally:
+        publisher.stop()
+        assert server.stop() == 0
+        node.destroy_node()
+        context.try_shutdown()
