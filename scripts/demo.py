@@ -1,33 +1,88 @@
 #!/usr/bin/env python3
-"""The main job (until the simulator lands): kidnap a robot to a random free pose on the
-shipped office map, ray-cast one 270 deg / 20 m scan there, localize it with the CLI, and
-print the estimated and the true pose with the error, and where the picture is."""
-import json
+"""The main job: the pybullet simulator puts a Pioneer 3-DX at a random free pose of the
+shipped office map (the kidnapping), the global_loc server localizes it from one scan
+when the client asks, and this script prints the estimated and the true pose with the
+error, and saves a picture. Three real processes over DDS on a private domain.
+
+usage: demo.py [SEED] [METHOD]
+"""
 import math
 import os
 import random
-import subprocess
 import sys
+import tempfile
 
-root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-out_dir = os.path.join(root, 'out')
-os.makedirs(out_dir, exist_ok=True)
-seed = int(sys.argv[1]) if len(sys.argv) > 1 else random.randrange(1_000_000)
-method = sys.argv[2] if len(sys.argv) > 2 else 'template_ccoeff'
-plot = os.path.join(out_dir, 'demo.png')
+import numpy as np
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+from sensor_msgs.msg import LaserScan
 
-scan = subprocess.run([sys.executable, '-m', 'global_loc', 'simulate', '--count', '1', '--seed', str(seed)],
-                      check=True, capture_output=True, text=True).stdout
-print(f'kidnapped the robot to a random free pose (seed {seed}); localizing one 270 deg scan with {method} ...')
-res = subprocess.run([sys.executable, '-m', 'global_loc', 'localize', '--scans', '-', '--method', method,
-                      '--plot', plot], input=scan, check=True, capture_output=True, text=True).stdout
-row = json.loads(res)
-t = row['truth']
-print(f'  true pose:      x={t["x"]:7.3f}  y={t["y"]:7.3f}  yaw={math.degrees(t["yaw"]):7.1f} deg')
-if 'x' in row:
-    print(f'  estimated pose: x={row["x"]:7.3f}  y={row["y"]:7.3f}  yaw={math.degrees(row["yaw"]):7.1f} deg')
-    print(f'  error: {row["error_xy"]:.3f} m, {row["error_yaw_deg"]:.1f} deg;  score {row["score"]}, '
-          f'{row["message"]}, {row["time_s"]:.2f} s')
-else:
-    print(f'  no pose: {row.get("message") or row.get("error")}')
-print(f'  picture: {plot}')
+from global_loc.localizer import pose_error
+from global_loc.map_io import load_map_yaml
+from global_loc.paths import default_map_yaml
+from global_loc.plot import plot_localization
+from global_loc.processes import TopicRecorder, isolated_env, reliable, start_server, start_sim
+from global_loc.raycast import sample_free_poses
+from global_loc.ros_convert import pose_from_msg, scan_from_msg
+from global_loc.scan import scan_to_points
+from global_loc.sim.simulator import BASE_T_LASER
+
+
+def fmt(p):
+    return f'x={p.x:7.3f}  y={p.y:7.3f}  yaw={math.degrees(p.yaw):7.1f} deg'
+
+
+def main():
+    seed = int(sys.argv[1]) if len(sys.argv) > 1 else random.randrange(1_000_000)
+    method = sys.argv[2] if len(sys.argv) > 2 else ''
+    map_yaml = default_map_yaml()
+    occupancy_map = load_map_yaml(map_yaml)
+    start = sample_free_poses(occupancy_map, 1, np.random.default_rng(seed))[0]
+    out_dir = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'out')
+    os.makedirs(out_dir, exist_ok=True)
+    logs = tempfile.mkdtemp(prefix='global_loc_demo_')
+    env = isolated_env()
+    print(f'kidnapping the robot to a random free pose of {os.path.basename(map_yaml)} (seed {seed})')
+    sim = start_sim(env, os.path.join(logs, 'sim.log'), f'x:={start.x}', f'y:={start.y}', f'yaw:={start.yaw}',
+                    f'seed:={seed}')
+    server = start_server(env, os.path.join(logs, 'server.log'), f'laser_x:={BASE_T_LASER.x}',
+                          f'laser_y:={BASE_T_LASER.y}', f'laser_yaw:={BASE_T_LASER.yaw}')
+    recorder = TopicRecorder(env, {'/initialpose': (PoseWithCovarianceStamped, reliable()),
+                                   '/sim/true_pose': (PoseStamped, reliable(latched=True)),
+                                   '/scan': (LaserScan, 5)})
+    code = 1
+    try:
+        print('asking the server (ros2 run global_loc test_global_loc) ...', flush=True)
+        import subprocess
+        from global_loc.processes import ros2
+        args = [ros2(), 'run', 'global_loc', 'test_global_loc', '--timeout', '10'] + (['--method', method] if method else [])
+        code = subprocess.run(args, env=env).returncode
+        truths = recorder.wait_for('/sim/true_pose', 1)
+        truth = pose_from_msg(truths[-1].pose)
+        published = recorder.wait_for('/initialpose', 1, timeout=3.0 if code == 0 else 0.5)
+        print()
+        print(f'true pose:      {fmt(truth)}')
+        estimate = None
+        if published:
+            estimate = pose_from_msg(published[-1].pose.pose)
+            d, a = pose_error(estimate, truth)
+            print(f'estimated pose: {fmt(estimate)}   (from /initialpose)')
+            print(f'error:          {d:.3f} m, {a:.1f} deg  ->  {"right" if d < 0.2 and a < 5 else "WRONG"} '
+                  f'(thesis criterion: < 0.2 m and < 5 deg)')
+        else:
+            print('estimated pose: none published (see the client output above)')
+        scans = recorder.messages['/scan']
+        if scans:
+            path = os.path.join(out_dir, 'demo.png')
+            plot_localization(path, occupancy_map, scan_to_points(scan_from_msg(scans[-1])).points, estimate,
+                              truth, base_T_laser=BASE_T_LASER, title=f'global_loc demo, seed {seed}')
+            print(f'picture:        {path}')
+        print(f'logs:           {logs}')
+    finally:
+        recorder.close()
+        server.stop()
+        sim.stop()
+    return code
+
+
+if __name__ == '__main__':
+    sys.exit(main())

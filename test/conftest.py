@@ -3,10 +3,10 @@ import os
 import pytest
 
 from global_loc.map_io import load_map_yaml
-from global_loc.paths import PACKAGE_ROOT
 
-SHARED_DATA = os.path.normpath(os.path.join(PACKAGE_ROOT, '..', 'shared', 'data'))
-OFFICE_YAML = os.path.join(PACKAGE_ROOT, 'maps', 'office.yaml')
+REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SHARED_DATA = os.path.normpath(os.path.join(REPO_ROOT, '..', 'shared', 'data'))
+OFFICE_YAML = os.path.join(REPO_ROOT, 'maps', 'office.yaml')
 
 
 def shared_path(*parts) -> str:

@@ -1,13 +1,17 @@
 """The action server, the client and /initialpose in separate processes over real DDS."""
 import math
+import os
 import re
+import sys
 import threading
 import time
 
 import pytest
 
 from conftest import OFFICE_YAML
-from ros_processes import isolated_env, run_client, start_scan_publisher, start_server
+from global_loc.processes import Process, TopicRecorder, isolated_env, reliable, run_client, start_server
+
+TEST_DIR = os.path.dirname(os.path.abspath(__file__))
 
 TRUTH = (3.0, 4.0, 0.7)     # a place the default (thesis) matcher gets right; see test_matchers
 
@@ -23,44 +27,23 @@ def assert_close(pose, truth):
     assert abs((pose[2] - truth[2] + math.pi) % (2 * math.pi) - math.pi) < math.radians(5), (pose, truth)
 
 
-class InitialPoseListener:
-    """An rclpy subscriber to /initialpose in this test process, spun in a thread."""
+def start_scan_publisher(env, log_path, map_yaml, pose, rate=5.0) -> Process:
+    """test/scan_publisher.py: scans ray-cast at `pose` (numpy, not the simulator)."""
+    return Process([sys.executable, os.path.join(TEST_DIR, 'scan_publisher.py'), map_yaml,
+                    *map(str, pose), str(rate)], env, log_path)
 
-    def __init__(self, env):
-        import rclpy
-        from geometry_msgs.msg import PoseWithCovarianceStamped
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=int(env['ROS_DOMAIN_ID']))
-        self.node = rclpy.create_node('initialpose_listener', context=self.context)
-        self.messages = []
-        self.node.create_subscription(PoseWithCovarianceStamped, '/initialpose', self.messages.append,
-                                      QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
-        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
 
-    def wait_for(self, count, timeout=10.0):
-        deadline = time.monotonic() + timeout
-        while len(self.messages) < count and time.monotonic() < deadline:
-            time.sleep(0.05)
-        return self.messages
-
-    def close(self):
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.context.try_shutdown()
+def initialpose_listener(env) -> TopicRecorder:
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+    return TopicRecorder(env, {'/initialpose': (PoseWithCovarianceStamped, reliable())})
 
 
 @pytest.fixture(scope='module')
 def system(tmp_path_factory):
     """Server + scan publisher at TRUTH + an /initialpose listener, on a private domain."""
-    import os
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     logs = tmp_path_factory.mktemp('ros')
     env = isolated_env()
-    listener = InitialPoseListener(env)
+    listener = initialpose_listener(env)
     server = start_server(env, logs / 'server.log', 'scan_timeout_s:=5.0')
     publisher = start_scan_publisher(env, logs / 'publisher.log', OFFICE_YAML, TRUTH)
     yield env, server, listener
@@ -71,14 +54,14 @@ def system(tmp_path_factory):
 
 def test_client_localizes_and_initialpose_carries_the_same_pose(system):
     env, server, listener = system
-    before = len(listener.messages)
+    before = len(listener.messages['/initialpose'])
     out = run_client(env, '--timeout', '10')
     assert out.returncode == 0, out.stdout + out.stderr
     assert 'succeeded: localized' in out.stdout
     assert 'waiting_for_scan' in out.stdout and 'matching' in out.stdout      # feedback arrived
     pose = parse_pose(out.stdout)
     assert_close(pose, TRUTH)
-    msgs = listener.wait_for(before + 1)
+    msgs = listener.wait_for('/initialpose', before + 1)
     assert len(msgs) == before + 1, 'nothing on /initialpose'
     msg = msgs[-1]
     assert msg.header.frame_id == 'map'
@@ -92,11 +75,11 @@ def test_client_localizes_and_initialpose_carries_the_same_pose(system):
 
 def test_no_publish_goal_leaves_initialpose_alone(system):
     env, server, listener = system
-    before = len(listener.messages)
+    before = len(listener.messages['/initialpose'])
     out = run_client(env, '--no-publish')
     assert out.returncode == 0, out.stdout + out.stderr
     time.sleep(1.0)
-    assert len(listener.messages) == before
+    assert len(listener.messages['/initialpose']) == before
 
 
 def test_unknown_method_aborts_and_the_server_keeps_serving(system):
@@ -122,7 +105,7 @@ def test_cancel_mid_search_ends_the_goal_quickly_and_the_server_keeps_serving(sy
 def test_goal_while_busy_is_aborted_with_a_reason(system):
     env, server, _ = system
     import subprocess
-    from ros_processes import ros2
+    from global_loc.processes import ros2
     started = server.output().count('matching a scan')
     slow = subprocess.Popen([ros2(), 'run', 'global_loc', 'test_global_loc', '--angle-step', '0.5',
                              '--cancel-after', '8'], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

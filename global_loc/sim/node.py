@@ -1,7 +1,114 @@
-"""`ros2 run global_loc sim` (the pybullet simulator node arrives with its own issue)."""
-import sys
+"""`ros2 run global_loc sim`: the pybullet simulator as a ROS node.
+
+Publishes sensor_msgs/LaserScan on /scan (frame `laser`, mounted on base_link at
+x 0.16 m — give the server `laser_x:=0.16`) at `rate_hz`, and the robot's true pose as
+geometry_msgs/PoseStamped on /sim/true_pose. Drives the wheels from /cmd_vel
+(geometry_msgs/Twist); /sim/set_pose (PoseStamped) teleports the robot (the kidnapping).
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import rclpy
+from geometry_msgs.msg import PoseStamped, Twist
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import LaserScan
+
+from ..map_io import MapError, load_map_yaml
+from ..ros_convert import pose_from_msg, pose_to_msg
+from ..transform import Rigid2D
+from .simulator import LaserConfig, Simulator
 
 
-def main():
-    print('global_loc sim: not implemented yet (the pybullet simulator is a later issue)', file=sys.stderr)
-    sys.exit(1)
+class SimNode(Node):
+    def __init__(self):
+        super().__init__('global_loc_sim')
+        from ..server import default_map_yaml
+
+        def param(name, value, description):
+            return self.declare_parameter(name, value, ParameterDescriptor(description=description)).value
+
+        map_yaml = param('map_yaml', default_map_yaml(), 'map the world is built from')
+        start = Rigid2D(param('x', 0.0, 'start x, m'), param('y', 0.0, 'start y, m'), param('yaw', 0.0, 'start yaw, rad'))
+        laser = LaserConfig(fov_deg=param('fov_deg', 270.0, 'laser field of view, degrees'),
+                            num_beams=param('num_beams', 541, 'laser beam count'),
+                            range_min=param('range_min', 0.05, 'm'), range_max=param('range_max', 20.0, 'm'),
+                            noise_std=param('noise_std', 0.01, 'Gaussian range noise, m'),
+                            dropout=param('dropout', 0.01, 'fraction of beams with no return'),
+                            rate_hz=param('rate_hz', 10.0, 'scan rate, Hz'))
+        clutter = param('clutter', 0, 'number of random objects (not in the map) placed in the world')
+        seed = param('seed', 0, 'random seed for noise and clutter')
+        self.sim = Simulator(load_map_yaml(map_yaml), laser, seed=seed)
+        self.sim.place(start)
+        if clutter:
+            self.sim.random_clutter(clutter, keep_clear_of=start)
+        self.cmd = (0.0, 0.0)
+        self.cmd_time = 0.0
+        self.scan_pub = self.create_publisher(LaserScan, '/scan', 5)
+        self.pose_pub = self.create_publisher(PoseStamped, '/sim/true_pose',
+                                              QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                                         durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self.create_subscription(Twist, '/cmd_vel', self.on_cmd_vel, 10)
+        self.create_subscription(PoseStamped, '/sim/set_pose', self.on_set_pose, 10)
+        self.period = 1.0 / laser.rate_hz
+        self.create_timer(self.period, self.tick)
+        self.get_logger().info(f'sim ready: {map_yaml} as {self.sim.num_wall_boxes} boxes, robot at '
+                               f'x={start.x:.2f} y={start.y:.2f} yaw={math.degrees(start.yaw):.1f} deg, '
+                               f'{clutter} clutter objects, {laser.num_beams} beams over {laser.fov_deg} deg')
+
+    def on_cmd_vel(self, msg: Twist) -> None:
+        """Latest velocity command; it lapses after 0.5 s without a new one."""
+        self.cmd = (msg.linear.x, msg.angular.z)
+        self.cmd_time = time.monotonic()
+
+    def on_set_pose(self, msg: PoseStamped) -> None:
+        """Teleport the robot."""
+        pose = pose_from_msg(msg.pose)
+        self.sim.place(pose)
+        self.get_logger().info(f'teleported to x={pose.x:.2f} y={pose.y:.2f} yaw={math.degrees(pose.yaw):.1f} deg')
+
+    def tick(self) -> None:
+        """Advance physics by one scan period (driving if commanded), publish scan and truth."""
+        v, w = self.cmd if time.monotonic() - self.cmd_time < 0.5 else (0.0, 0.0)
+        if v or w:
+            self.sim.drive(v, w, self.period)
+        scan = self.sim.scan()
+        stamp = self.get_clock().now().to_msg()
+        msg = LaserScan(angle_min=scan.angle_min, angle_increment=scan.angle_increment,
+                        angle_max=scan.angle_min + scan.angle_increment * (len(scan.ranges) - 1),
+                        scan_time=self.period, range_min=scan.range_min, range_max=scan.range_max,
+                        ranges=[float(r) for r in scan.ranges])
+        msg.header.frame_id = 'laser'
+        msg.header.stamp = stamp
+        truth = PoseStamped()
+        truth.header.frame_id = 'map'
+        truth.header.stamp = stamp
+        truth.pose = pose_to_msg(self.sim.true_pose())
+        self.scan_pub.publish(msg)
+        self.pose_pub.publish(truth)
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = SimNode()
+        rclpy.spin(node)
+    except MapError as e:
+        print(f'global_loc sim: {e}')
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.sim.close()
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+if __name__ == '__main__':
+    main()

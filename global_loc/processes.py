@@ -1,0 +1,118 @@
+"""Starting and stopping the package's ROS 2 processes (server, sim, client) for the
+demo and the tests, in the place of `ros2 launch` (not on PyPI). A private DDS domain
+(ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, a random ROS_DOMAIN_ID) keeps runs apart."""
+import os
+import random
+import shutil
+import signal
+import subprocess
+import time
+
+def isolated_env() -> dict:
+    env = dict(os.environ)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 101))
+    env['PYTHONUNBUFFERED'] = '1'
+    return env
+
+
+def ros2() -> str:
+    exe = shutil.which('ros2')
+    if not exe:
+        raise RuntimeError('no ros2 command on PATH: source env.sh (or use make test / make demo)')
+    return exe
+
+
+class Process:
+    """A background process with its output in a log file; stopped with SIGTERM."""
+
+    def __init__(self, args, env, log_path):
+        self.log_path = log_path
+        self.log = open(log_path, 'w')
+        self.proc = subprocess.Popen(args, env=env, stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
+
+    def output(self) -> str:
+        with open(self.log_path) as f:
+            return f.read()
+
+    def wait_for_output(self, text: str, timeout: float = 30.0) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in self.output():
+                return
+            if self.proc.poll() is not None:
+                raise RuntimeError(f'process exited ({self.proc.returncode}) before printing {text!r}:\n{self.output()}')
+            time.sleep(0.1)
+        raise RuntimeError(f'no {text!r} within {timeout} s:\n{self.output()}')
+
+    def stop(self, timeout: float = 10.0) -> int:
+        if self.proc.poll() is None:
+            os.killpg(self.proc.pid, signal.SIGTERM)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+                self.proc.wait()
+        self.log.close()
+        return self.proc.returncode
+
+
+def start_server(env, log_path, *params) -> Process:
+    args = [ros2(), 'run', 'global_loc', 'server', '--ros-args']
+    for p in params:
+        args += ['-p', p]
+    server = Process(args, env, log_path)
+    server.wait_for_output('ready: action')
+    return server
+
+
+def start_sim(env, log_path, *params) -> Process:
+    args = [ros2(), 'run', 'global_loc', 'sim', '--ros-args']
+    for p in params:
+        args += ['-p', p]
+    sim = Process(args, env, log_path)
+    sim.wait_for_output('sim ready')
+    return sim
+
+
+def run_client(env, *args, timeout=120.0) -> subprocess.CompletedProcess:
+    return subprocess.run([ros2(), 'run', 'global_loc', 'test_global_loc', *args], env=env, capture_output=True,
+                          text=True, timeout=timeout)
+
+
+class TopicRecorder:
+    """Records messages of a few topics in this process (its own rclpy context on the
+    env's domain), spun in a background thread. `topics`: {name: (msg type, qos)}."""
+
+    def __init__(self, env: dict, topics: dict, node_name: str = 'global_loc_recorder'):
+        import threading
+
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=int(env['ROS_DOMAIN_ID']))
+        self.node = rclpy.create_node(node_name, context=self.context)
+        self.messages = {name: [] for name in topics}
+        for name, (msg_type, qos) in topics.items():
+            self.node.create_subscription(msg_type, name, self.messages[name].append, qos)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+
+    def wait_for(self, topic: str, count: int, timeout: float = 10.0) -> list:
+        deadline = time.monotonic() + timeout
+        while len(self.messages[topic]) < count and time.monotonic() < deadline:
+            time.sleep(0.05)
+        return self.messages[topic]
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+def reliable(depth: int = 10, latched: bool = False):
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    return QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)

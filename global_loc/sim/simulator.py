@@ -1,0 +1,168 @@
+"""The pybullet Pioneer 3-DX scan simulator (headless, DIRECT mode), without ROS.
+
+    sim = Simulator(load_map_yaml('maps/office.yaml'), LaserConfig(fov_deg=270))
+    sim.place(Rigid2D(3.0, 4.0, 0.7))          # the kidnapping
+    scan = sim.scan()                          # a global_loc.scan.Scan
+    sim.drive(v=0.0, w=0.5, duration=1.0)      # wheels, physics stepped at 240 Hz
+    sim.true_pose()                            # base_link in the map frame
+
+The laser is cast with rayTestBatch from the laser link's pose, so clutter added with
+`add_clutter` (boxes, cylinders not in the map) shows in the scans.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as p
+
+from ..map_io import OccupancyMap
+from ..scan import Scan
+from ..transform import Rigid2D
+from .world import add_map_walls
+
+URDF = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'pioneer3dx.urdf')
+# The laser's mounting on base_link, as in the URDF (laser_joint): publish it to the server.
+BASE_T_LASER = Rigid2D(0.16, 0.0, 0.0)
+LASER_HEIGHT = 0.30
+WHEEL_RADIUS = 0.0975
+WHEEL_SEPARATION = 0.33
+PHYSICS_HZ = 240.0
+
+
+@dataclass
+class LaserConfig:
+    fov_deg: float = 270.0
+    num_beams: int = 541
+    range_min: float = 0.05
+    range_max: float = 20.0
+    noise_std: float = 0.01      # Gaussian range noise, m
+    dropout: float = 0.01        # fraction of beams with no return (NaN)
+    rate_hz: float = 10.0
+
+    def angles(self) -> tuple[float, float, np.ndarray]:
+        """(angle_min, angle_increment, angles) centred on the laser's x axis."""
+        fov = math.radians(self.fov_deg)
+        if self.fov_deg >= 360.0:
+            inc = fov / self.num_beams
+            a0 = -math.pi
+        else:
+            inc = fov / (self.num_beams - 1)
+            a0 = -fov / 2.0
+        return a0, inc, a0 + inc * np.arange(self.num_beams)
+
+
+@dataclass
+class ClutterObject:
+    """A box (size = (sx, sy)) or cylinder (size = (radius,)) standing on the floor."""
+    x: float
+    y: float
+    size: tuple
+    height: float = 1.0
+    yaw: float = 0.0
+
+
+class Simulator:
+    def __init__(self, occupancy_map: OccupancyMap, laser: LaserConfig | None = None, seed: int = 0):
+        self.map = occupancy_map
+        self.laser = laser or LaserConfig()
+        self.rng = np.random.default_rng(seed)
+        self.client = p.connect(p.DIRECT)
+        p.setGravity(0, 0, -9.81, physicsClientId=self.client)
+        p.setTimeStep(1.0 / PHYSICS_HZ, physicsClientId=self.client)
+        plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=self.client)
+        p.createMultiBody(0, plane, physicsClientId=self.client)
+        self.num_wall_boxes = add_map_walls(self.client, occupancy_map)
+        self.robot = p.loadURDF(URDF, [0, 0, 0], physicsClientId=self.client)
+        joints = {p.getJointInfo(self.robot, j, physicsClientId=self.client)[1].decode(): j
+                  for j in range(p.getNumJoints(self.robot, physicsClientId=self.client))}
+        self.left, self.right = joints['left_wheel_joint'], joints['right_wheel_joint']
+        self.laser_link = joints['laser_joint']
+        caster = joints['caster_joint']
+        p.changeDynamics(self.robot, caster, lateralFriction=0.0, rollingFriction=0.0, physicsClientId=self.client)
+        self.clutter_ids = []
+
+    def close(self) -> None:
+        if self.client is not None and p.isConnected(self.client):
+            p.disconnect(self.client)
+        self.client = None
+
+    def place(self, pose: Rigid2D) -> None:
+        """Teleport the robot (base_link) to a pose in the map frame, at rest."""
+        p.resetBasePositionAndOrientation(self.robot, [pose.x, pose.y, 0.0],
+                                          p.getQuaternionFromEuler([0, 0, pose.yaw]), physicsClientId=self.client)
+        p.resetBaseVelocity(self.robot, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+        for j in (self.left, self.right):
+            p.setJointMotorControl2(self.robot, j, p.VELOCITY_CONTROL, targetVelocity=0.0, force=20.0,
+                                    physicsClientId=self.client)
+
+    def true_pose(self) -> Rigid2D:
+        (x, y, _), q = p.getBasePositionAndOrientation(self.robot, physicsClientId=self.client)
+        return Rigid2D(x, y, p.getEulerFromQuaternion(q)[2])
+
+    def drive(self, v: float, w: float, duration: float) -> None:
+        """Drive the wheels for (v m/s, w rad/s) during `duration` seconds of simulated time."""
+        left = (v - w * WHEEL_SEPARATION / 2.0) / WHEEL_RADIUS
+        right = (v + w * WHEEL_SEPARATION / 2.0) / WHEEL_RADIUS
+        for j, speed in ((self.left, left), (self.right, right)):
+            p.setJointMotorControl2(self.robot, j, p.VELOCITY_CONTROL, targetVelocity=speed, force=20.0,
+                                    physicsClientId=self.client)
+        for _ in range(max(1, int(round(duration * PHYSICS_HZ)))):
+            p.stepSimulation(physicsClientId=self.client)
+
+    def add_clutter(self, objects: list[ClutterObject]) -> None:
+        for o in objects:
+            if len(o.size) == 1:
+                shape = p.createCollisionShape(p.GEOM_CYLINDER, radius=o.size[0], height=o.height,
+                                               physicsClientId=self.client)
+            else:
+                shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[o.size[0] / 2, o.size[1] / 2, o.height / 2],
+                                               physicsClientId=self.client)
+            self.clutter_ids.append(p.createMultiBody(0, shape, -1, [o.x, o.y, o.height / 2],
+                                                      p.getQuaternionFromEuler([0, 0, o.yaw]),
+                                                      physicsClientId=self.client))
+
+    def random_clutter(self, count: int, keep_clear_of: Rigid2D | None = None, clear_radius: float = 1.0):
+        """`count` chairs/bins/people-sized objects on free cells, away from a pose."""
+        from ..raycast import sample_free_poses
+        objects = []
+        for pose in sample_free_poses(self.map, count * 4, self.rng, clearance=0.5):
+            if keep_clear_of is not None and math.hypot(pose.x - keep_clear_of.x, pose.y - keep_clear_of.y) < clear_radius:
+                continue
+            kind = self.rng.integers(3)
+            size = [(float(self.rng.uniform(0.4, 0.6)), float(self.rng.uniform(0.4, 0.6))),   # chair
+                    (float(self.rng.uniform(0.15, 0.25)),),                                  # bin
+                    (0.25,)][kind]                                                           # person
+            objects.append(ClutterObject(pose.x, pose.y, size, 1.0, pose.yaw))
+            if len(objects) == count:
+                break
+        self.add_clutter(objects)
+        return objects
+
+    def laser_pose(self) -> Rigid2D:
+        pos, q = p.getLinkState(self.robot, self.laser_link, computeForwardKinematics=True,
+                                physicsClientId=self.client)[4:6]
+        return Rigid2D(pos[0], pos[1], p.getEulerFromQuaternion(q)[2])
+
+    def scan(self) -> Scan:
+        """One scan from the laser's current pose: ranges to the first hit, inf where none,
+        Gaussian noise, NaN dropouts."""
+        cfg = self.laser
+        a0, inc, angles = cfg.angles()
+        lp = self.laser_pose()
+        pos = p.getLinkState(self.robot, self.laser_link, physicsClientId=self.client)[4]
+        world = lp.yaw + angles
+        starts = np.column_stack([lp.x + cfg.range_min * np.cos(world), lp.y + cfg.range_min * np.sin(world),
+                                  np.full(len(world), pos[2])])
+        ends = np.column_stack([lp.x + cfg.range_max * np.cos(world), lp.y + cfg.range_max * np.sin(world),
+                                np.full(len(world), pos[2])])
+        hits = p.rayTestBatch(starts.tolist(), ends.tolist(), numThreads=0, physicsClientId=self.client)
+        frac = np.array([h[2] if h[0] >= 0 else np.inf for h in hits])
+        ranges = cfg.range_min + frac * (cfg.range_max - cfg.range_min)
+        if cfg.noise_std > 0:
+            ranges = ranges + self.rng.normal(0.0, cfg.noise_std, ranges.shape)
+        if cfg.dropout > 0:
+            ranges[self.rng.random(ranges.shape) < cfg.dropout] = np.nan
+        return Scan(a0, inc, cfg.range_min, cfg.range_max, ranges)
