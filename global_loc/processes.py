@@ -57,22 +57,22 @@ class Process:
         return self.proc.returncode
 
 
-def start_server(env, log_path, *params) -> Process:
-    args = [ros2(), 'run', 'global_loc', 'server', '--ros-args']
+def start_node(env, log_path, executable: str, ready_line: str, *params) -> Process:
+    """`ros2 run global_loc EXECUTABLE --ros-args -p NAME:=VALUE ...`, once it logged `ready_line`."""
+    args = [ros2(), 'run', 'global_loc', executable, '--ros-args']
     for p in params:
         args += ['-p', p]
-    server = Process(args, env, log_path)
-    server.wait_for_output('ready: action')
-    return server
+    node = Process(args, env, log_path)
+    node.wait_for_output(ready_line)
+    return node
+
+
+def start_server(env, log_path, *params) -> Process:
+    return start_node(env, log_path, 'server', 'ready: action', *params)
 
 
 def start_sim(env, log_path, *params) -> Process:
-    args = [ros2(), 'run', 'global_loc', 'sim', '--ros-args']
-    for p in params:
-        args += ['-p', p]
-    sim = Process(args, env, log_path)
-    sim.wait_for_output('sim ready')
-    return sim
+    return start_node(env, log_path, 'sim', 'sim ready', *params)
 
 
 def run_client(env, *args, timeout=120.0) -> subprocess.CompletedProcess:
