@@ -1,0 +1,179 @@
+"""Real laser logs in the CARMEN format (Radish data sets) and occupancy maps built
+from them, for the benchmark's held-out localization (no ROS).
+
+FLASER n r1..rn x y theta odom_x odom_y odom_theta ipc_timestamp hostname logger_timestamp:
+beams from -pi/2 counter-clockwise (1 deg for 180/181 beams, 0.5 deg for 360/361),
+`x y theta` the SLAM-corrected laser pose, a reading within 1% of the log's maximum
+value meaning "no return".
+"""
+from __future__ import annotations
+
+import gzip
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .map_io import FREE, OCCUPIED, UNKNOWN, OccupancyMap
+from .scan import Scan
+from .transform import Rigid2D
+
+
+@dataclass
+class LaserRecord:
+    scan: Scan
+    pose: Rigid2D          # corrected laser pose
+    timestamp: float
+
+
+def read_flaser(path: str) -> list[LaserRecord]:
+    """All FLASER records of a (gzipped) CARMEN log, in file order."""
+    opener = gzip.open if path.endswith('.gz') else open
+    raw = []
+    with opener(path, 'rt') as f:
+        for line in f:
+            if not line.startswith('FLASER '):
+                continue
+            parts = line.split()
+            n = int(parts[1])
+            ranges = np.array(parts[2:2 + n], dtype=float)
+            x, y, theta = (float(v) for v in parts[2 + n:5 + n])
+            raw.append((ranges, Rigid2D(x, y, theta), float(parts[8 + n])))
+    if not raw:
+        raise ValueError(f'{path}: no FLASER records')
+    max_reading = max(float(r.max()) for r, _, _ in raw)
+    range_max = 0.99 * max_reading            # at or above: no return (dropped by scan_to_points)
+    records = []
+    for ranges, pose, stamp in raw:
+        n = len(ranges)
+        increment = math.radians(1.0) if n <= 181 else math.radians(0.5)
+        records.append(LaserRecord(Scan(-math.pi / 2, increment, 0.0, range_max, ranges, stamp), pose, stamp))
+    return records
+
+
+@dataclass
+class GridCounts:
+    """Per-cell counts from a set of scans over a fixed grid: beam end points (`hits`)
+    and scans whose swept area covers the cell (`visits`). Counts add, so a map from
+    all folds but one is a sum."""
+    hits: np.ndarray
+    visits: np.ndarray
+
+    def __add__(self, other: 'GridCounts') -> 'GridCounts':
+        return GridCounts(self.hits + other.hits, self.visits + other.visits)
+
+
+class GridFrame:
+    """The common grid of a log's maps: bounds from all poses and end points, + margin."""
+
+    def __init__(self, records: list[LaserRecord], resolution: float, margin: float = 2.0, max_free: float = 15.0):
+        pts = np.vstack([r.pose.apply(_endpoints(r.scan)[0]) for r in records[::5]] +
+                        [np.array([[r.pose.x, r.pose.y] for r in records])])
+        lo, hi = pts.min(axis=0) - margin, pts.max(axis=0) + margin
+        self.resolution = resolution
+        self.origin = Rigid2D(float(lo[0]), float(lo[1]), 0.0)
+        self.width = int(math.ceil((hi[0] - lo[0]) / resolution))
+        self.height = int(math.ceil((hi[1] - lo[1]) / resolution))
+        self.max_free = max_free
+
+    def to_pixels(self, xy: np.ndarray) -> np.ndarray:
+        """World points -> integer (col, row), row 0 at the top."""
+        col = np.floor((xy[:, 0] - self.origin.x) / self.resolution).astype(int)
+        row = self.height - 1 - np.floor((xy[:, 1] - self.origin.y) / self.resolution).astype(int)
+        return np.stack([col, row], axis=1)
+
+    def counts(self, records: list[LaserRecord]) -> GridCounts:
+        hits = np.zeros((self.height, self.width), np.int32)
+        visits = np.zeros((self.height, self.width), np.int32)
+        for rec in records:
+            points, no_return_points = _endpoints(rec.scan, self.max_free)
+            end = self.to_pixels(rec.pose.apply(points))
+            inside = (end[:, 0] >= 0) & (end[:, 0] < self.width) & (end[:, 1] >= 0) & (end[:, 1] < self.height)
+            np.add.at(hits, (end[inside, 1], end[inside, 0]), 1)
+            # The area a scan saw as free: the polygon laser -> beam ends (no-return beams
+            # count as free out to max_free), filled in a window around the scan.
+            poly = self.to_pixels(np.vstack([[rec.pose.x, rec.pose.y], rec.pose.apply(no_return_points)]))
+            c0, r0 = np.maximum(poly.min(axis=0), 0)
+            c1, r1 = np.minimum(poly.max(axis=0) + 1, [self.width, self.height])
+            if c1 <= c0 or r1 <= r0:
+                continue
+            window = np.zeros((r1 - r0, c1 - c0), np.uint8)
+            cv2.fillPoly(window, [(poly - [c0, r0]).astype(np.int32)], 1)
+            visits[r0:r1, c0:c1] += window
+        return GridCounts(hits, visits)
+
+    def occupancy_map(self, counts: GridCounts, source: str) -> OccupancyMap:
+        """Occupied where a cell was hit at least twice and in at least a fifth of the
+        scans that saw it (people walking by are hit once or twice among many visits);
+        free where seen otherwise; unknown where never seen."""
+        occ = np.full((self.height, self.width), UNKNOWN, np.int8)
+        occ[counts.visits > 0] = FREE
+        occupied = (counts.hits >= 2) & (counts.hits * 5 >= counts.visits)
+        occ[occupied] = OCCUPIED
+        return OccupancyMap(occ, self.resolution, self.origin, source)
+
+
+def _endpoints(scan: Scan, max_free: float = 15.0):
+    """(valid end points, polygon points with no-return and long beams capped at max_free),
+    both in the laser frame."""
+    r = np.asarray(scan.ranges, dtype=float)
+    a = scan.angle_min + scan.angle_increment * np.arange(len(r))
+    valid = np.isfinite(r) & (r > scan.range_min) & (r < scan.range_max)
+    hit_pts = np.stack([r[valid] * np.cos(a[valid]), r[valid] * np.sin(a[valid])], axis=1)
+    capped = np.where(valid, np.minimum(r, max_free), max_free)
+    poly_pts = np.stack([capped * np.cos(a), capped * np.sin(a)], axis=1)
+    return hit_pts, poly_pts
+
+
+def explained_fraction(occupancy_map: OccupancyMap, record: LaserRecord, cells: float = 2.0) -> float:
+    """Fraction of the scan's returns that lie within `cells` cells of an occupied cell
+    of the map at the reference pose (a scan the map cannot explain tests mapping)."""
+    dist = cv2.distanceTransform((~occupancy_map.occupied).astype(np.uint8), cv2.DIST_L2, 5)
+    return _explained(occupancy_map, dist, record, cells)
+
+
+def _explained(occupancy_map, dist, record, cells):
+    pts, _ = _endpoints(record.scan)
+    if len(pts) == 0:
+        return 0.0
+    uv = np.rint(occupancy_map.world_to_pixel(record.pose.apply(pts))).astype(int)
+    inside = (uv[:, 0] >= 0) & (uv[:, 0] < occupancy_map.width) & (uv[:, 1] >= 0) & (uv[:, 1] < occupancy_map.height)
+    near = np.zeros(len(uv), bool)
+    near[inside] = dist[uv[inside, 1], uv[inside, 0]] <= cells
+    return float(near.mean())
+
+
+@dataclass
+class HeldOutScan:
+    record: LaserRecord
+    fold: int
+
+
+def held_out_folds(records: list[LaserRecord], frame: GridFrame, folds: int = 5, min_explained: float = 0.7):
+    """Split the log into `folds` time blocks; for each, the map from all *other* blocks
+    and the block's scans that pass both filters (pose on mapped free space; at least
+    `min_explained` of returns within two cells of a mapped wall).
+    Returns ({fold: OccupancyMap}, [HeldOutScan], filter counts)."""
+    blocks = np.array_split(np.arange(len(records)), folds)
+    per_fold = [frame.counts([records[i] for i in b]) for b in blocks]
+    total = per_fold[0]
+    for c in per_fold[1:]:
+        total = total + c
+    maps, kept = {}, []
+    stats = {'scans': len(records), 'pose_on_free_space': 0, 'explained_by_map': 0}
+    for k, block in enumerate(blocks):
+        others = GridCounts(total.hits - per_fold[k].hits, total.visits - per_fold[k].visits)
+        m = frame.occupancy_map(others, f'held-out fold {k}')
+        maps[k] = m
+        dist = cv2.distanceTransform((~m.occupied).astype(np.uint8), cv2.DIST_L2, 5)
+        for i in block:
+            rec = records[i]
+            if not m.is_free_at([[rec.pose.x, rec.pose.y]])[0]:
+                continue
+            stats['pose_on_free_space'] += 1
+            if _explained(m, dist, rec, 2.0) < min_explained:
+                continue
+            stats['explained_by_map'] += 1
+            kept.append(HeldOutScan(rec, k))
+    return maps, kept, stats
