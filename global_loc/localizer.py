@@ -16,7 +16,7 @@ import numpy as np
 from .map_io import OccupancyMap
 from .matchers import Candidate, MatchOptions, make_matcher, resolve_method
 from .matchers.base import ProgressFn
-from .scan import Scan, scan_to_points
+from .scan import Scan, ScanPoints, scan_to_points
 from .transform import Rigid2D, normalize_angle
 
 
@@ -96,9 +96,15 @@ class Localizer:
         """Localize one scan. Raises ScanError for an unusable scan, MethodError for an
         unknown method and Cancelled if `progress` raises it; otherwise returns a result,
         successful or not. `base_T_laser` overrides the config's laser mounting."""
-        cfg = self.config
         t0 = time.perf_counter()
-        points = scan_to_points(scan)
+        return self.localize_points(scan_to_points(scan), method, angle_step_deg, progress, base_T_laser, t0)
+
+    def localize_points(self, points: ScanPoints, method: Optional[str] = None,
+                        angle_step_deg: Optional[float] = None, progress: Optional[ProgressFn] = None,
+                        base_T_laser: Optional[Rigid2D] = None, t0: Optional[float] = None) -> LocalizationResult:
+        """`localize` for points already in the laser frame (e.g. a local map cut from the map)."""
+        cfg = self.config
+        t0 = time.perf_counter() if t0 is None else t0
         matcher = self.matcher(method or cfg.method)
         options = MatchOptions(angle_step_deg=angle_step_deg or cfg.angle_step_deg,
                                opening_kernel=cfg.opening_kernel)

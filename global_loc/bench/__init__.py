@@ -1,0 +1,1 @@
+"""The benchmark: `python -m global_loc.bench [--quick]` (see README)."""

@@ -1,0 +1,151 @@
+"""`python -m global_loc.bench [--quick] [--suites cut,sim,carmen] [--jobs N]`
+
+Runs the benchmark suites through the same Localizer the server uses, writes raw rows
+(rows.jsonl), REPORT.md and PNG plots into the output folder (default
+benchmarks/results/, or benchmarks/results/quick/ with --quick). Seeded: the same
+command makes the same trials; timings are the machine's.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import multiprocessing as mp
+import os
+import platform
+import subprocess
+import sys
+import time
+
+import numpy as np
+from tqdm import tqdm
+
+from ..localizer import Localizer, pose_error
+from ..paths import PACKAGE_ROOT
+from .report import write_report
+from .suites import ANGLE_STEP_METHODS, THESIS_METHODS, carmen_trials, cut_trials, load_maps, sim_trials
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+_MAPS = {}        # map name -> OccupancyMap, set before the workers fork
+_LOCALIZERS = {}  # per worker process
+
+
+def run_job(job):
+    """One (trial, method) localization in a worker; returns a row."""
+    trial_id, trial, method = job
+    loc = _LOCALIZERS.get(trial.map_name)
+    if loc is None:
+        loc = _LOCALIZERS[trial.map_name] = Localizer(_MAPS[trial.map_name])
+    row = {'trial': trial_id, 'suite': trial.suite, 'map': trial.map_name, **trial.condition, 'method': method,
+           'local_map_cells': trial.local_map_cells,
+           'truth': [round(v, 4) for v in trial.truth.as_tuple()]}
+    step = trial.condition.get('angle_step', 5)
+    try:
+        if trial.points is not None:
+            res = loc.localize_points(trial.points, method, step)
+        else:
+            res = loc.localize(trial.scan, method, step, base_T_laser=trial.base_T_laser)
+    except Exception as e:   # a failure of a method on one trial is a data point, not a crash
+        return {**row, 'error': f'{type(e).__name__}: {e}', 'ok': False, 'ok_loose': False, 'success': False,
+                'time_s': float('nan')}
+    row.update(time_s=res.time_s, success=res.success, confidence=res.confidence,
+               score=res.score if math.isfinite(res.score) else None, found=res.pose is not None,
+               top4_ok=any(_ok(pose_error(h.pose, trial.truth), 0.2, 5) for h in res.hypotheses[:4]))
+    if res.pose is None:
+        row.update(ok=False, ok_loose=False)
+    else:
+        err = pose_error(res.pose, trial.truth)
+        row.update(estimate=[round(v, 4) for v in res.pose.as_tuple()], err_xy=round(err[0], 4),
+                   err_yaw_deg=round(err[1], 3), ok=_ok(err, 0.2, 5), ok_loose=_ok(err, 0.5, 10))
+    return row
+
+
+def _ok(err, d, a):
+    return bool(err[0] < d and err[1] < a)
+
+
+def _worker_init():
+    import cv2
+    cv2.setNumThreads(1)   # the workers share the cores; OpenCV's own threads would fight them
+
+
+def machine_info() -> dict:
+    cpu = platform.processor()
+    try:
+        with open('/proc/cpuinfo') as f:
+            cpu = next(line.split(':', 1)[1].strip() for line in f if line.startswith('model name'))
+    except (OSError, StopIteration):
+        pass
+    import cv2
+    import pybullet  # noqa: F401
+    import scipy
+    try:
+        commit = subprocess.run(['git', 'rev-parse', 'HEAD'], cwd=REPO, capture_output=True, text=True).stdout.strip()
+        dirty = bool(subprocess.run(['git', 'status', '--porcelain', '--untracked-files=no'], cwd=REPO,
+                                    capture_output=True, text=True).stdout.strip())
+    except OSError:
+        commit, dirty = 'unknown', False
+    from importlib.metadata import version
+    return {'cpu': cpu, 'cores': os.cpu_count(), 'python': platform.python_version(),
+            'numpy': np.__version__, 'opencv': cv2.__version__, 'scipy': scipy.__version__,
+            'pybullet': version('pybullet'), 'git_commit': commit + (' (with uncommitted changes)' if dirty else ''),
+            'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog='python -m global_loc.bench', description=__doc__.splitlines()[0])
+    parser.add_argument('--quick', action='store_true', help='few poses and maps: a few minutes')
+    parser.add_argument('--suites', default='cut,sim,carmen', help='comma-separated: cut, sim, carmen')
+    parser.add_argument('--methods', default=','.join(THESIS_METHODS))
+    parser.add_argument('--jobs', type=int, default=os.cpu_count() or 1, help='worker processes')
+    parser.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'), help='shared/data folder')
+    parser.add_argument('--out', default=None, help='output folder')
+    parser.add_argument('--seed', type=int, default=2015)
+    parser.add_argument('--poses', type=int, default=0, help='poses per map (default: 50, quick 6; suite 1: a fifth)')
+    parser.add_argument('--scans-per-log', type=int, default=0, help='real scans per log (default: 150, quick 12)')
+    args = parser.parse_args(argv)
+    out = args.out or os.path.join(REPO, 'benchmarks', 'results', 'quick' if args.quick else '')
+    os.makedirs(out, exist_ok=True)
+    suites = args.suites.split(',')
+    methods = args.methods.split(',')
+    if not os.path.isdir(args.shared):
+        print(f'note: {args.shared} not found: real maps and logs are skipped', file=sys.stderr)
+
+    t0 = time.time()
+    poses = args.poses or (6 if args.quick else 50)
+    maps = load_maps(args.shared, args.quick)
+    trials, notes = [], {}
+    if 'cut' in suites:
+        trials += cut_trials(maps, max(1, poses // 5) if args.poses else (3 if args.quick else 10), args.seed)
+    if 'sim' in suites:
+        print('simulating scans with pybullet ...', file=sys.stderr)
+        trials += sim_trials(maps, poses, args.seed)
+    if 'carmen' in suites:
+        print('building held-out maps from the CARMEN logs ...', file=sys.stderr)
+        carmen, carmen_maps, notes['carmen_filters'] = carmen_trials(
+            args.shared, args.scans_per_log or (12 if args.quick else 150), args.seed)
+        trials += carmen
+        maps.update(carmen_maps)
+    _MAPS.update(maps)
+    jobs = [(i, t, m) for i, t in enumerate(trials) for m in methods
+            if not (m not in ANGLE_STEP_METHODS and t.condition.get('angle_step', 5) != 5)]
+    rows = []
+    ctx = mp.get_context('fork')
+    with ctx.Pool(args.jobs, initializer=_worker_init) as pool:
+        for row in tqdm(pool.imap_unordered(run_job, jobs, chunksize=2), total=len(jobs), desc='localizations',
+                        file=sys.stderr):
+            rows.append(row)
+    with open(os.path.join(out, 'rows.jsonl'), 'w') as f:
+        for row in rows:
+            f.write(json.dumps(row) + '\n')
+    meta = {'machine': machine_info(), 'command': 'python -m global_loc.bench ' + ' '.join(argv or sys.argv[1:]),
+            'jobs': args.jobs, 'wall_time_s': round(time.time() - t0, 1), 'quick': args.quick,
+            'maps': {n: f'{m.width} x {m.height} cells at {m.resolution} m' for n, m in maps.items() if '/' not in n},
+            **notes}
+    write_report(rows, meta, out, {n: m for n, m in maps.items()}, trials)
+    print(f'wrote {out}/REPORT.md ({len(rows)} localizations in {meta["wall_time_s"]} s)', file=sys.stderr)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,214 @@
+"""REPORT.md and plots from the benchmark's rows."""
+from __future__ import annotations
+
+import math
+import os
+from collections import defaultdict
+
+import matplotlib
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ..plot import plot_localization  # noqa: E402
+from ..scan import scan_to_points  # noqa: E402
+from ..transform import Rigid2D  # noqa: E402
+
+BASELINE = 'template_ccoeff'
+
+
+def stats(rows: list[dict]) -> dict:
+    times = np.array([r['time_s'] for r in rows if math.isfinite(r.get('time_s', float('nan')))])
+    n = len(rows)
+    return {'n': n,
+            'ok': sum(r['ok'] for r in rows) / n if n else float('nan'),
+            'ok_loose': sum(r['ok_loose'] for r in rows) / n if n else float('nan'),
+            'top4': sum(r.get('top4_ok', False) for r in rows) / n if n else float('nan'),
+            'marked_wrong': sum(r['success'] and not r['ok'] for r in rows) / n if n else float('nan'),
+            'marked': sum(r['success'] for r in rows) / n if n else float('nan'),
+            'median': float(np.median(times)) if len(times) else float('nan'),
+            'p95': float(np.percentile(times, 95)) if len(times) else float('nan')}
+
+
+def group(rows, key):
+    out = defaultdict(list)
+    for r in rows:
+        out[key(r)].append(r)
+    return out
+
+
+def pct(v):
+    return '–' if not math.isfinite(v) else f'{100 * v:.0f}%'
+
+
+def secs(v):
+    return '–' if not math.isfinite(v) else (f'{v:.3f}' if v < 1 else f'{v:.2f}')
+
+
+def method_table(rows, label_fn, label_name, methods, baseline_rows=None) -> str:
+    """One line per (label, method): success at both criteria, times, speed vs baseline."""
+    lines = [f'| {label_name} | method | n | success 0.2 m/5° | success 0.5 m/10° | marked success but wrong '
+             f'| median time [s] | p95 time [s] | time / baseline |',
+             '|---|---|---|---|---|---|---|---|---|']
+    for label, group_rows in sorted(group(rows, label_fn).items(), key=lambda kv: str(kv[0])):
+        base = stats([r for r in group_rows if r['method'] == BASELINE and r.get('angle_step', 5) == 5])
+        for m in methods:
+            mr = [r for r in group_rows if r['method'] == m]
+            if not mr:
+                continue
+            s = stats(mr)
+            ratio = s['median'] / base['median'] if math.isfinite(base['median']) and base['median'] > 0 else float('nan')
+            lines.append(f'| {label} | {m} | {s["n"]} | {pct(s["ok"])} | {pct(s["ok_loose"])} | {pct(s["marked_wrong"])} '
+                         f'| {secs(s["median"])} | {secs(s["p95"])} | {"–" if not math.isfinite(ratio) else f"{ratio:.3f}"} |')
+    return '\n'.join(lines)
+
+
+def cond_label(r):
+    c = f'{r["fov"]}° / {r["range"]} m / Δα {r["angle_step"]:g}°'
+    return c + (f' / clutter {r["clutter"]}' if r.get('clutter') else '')
+
+
+def write_report(rows, meta, out, maps, trials) -> None:
+    methods = sorted({r['method'] for r in rows}, key=lambda m: (m != BASELINE, m))
+    by_suite = group(rows, lambda r: r['suite'])
+    md = ['# global_loc benchmark' + (' (quick)' if meta['quick'] else ''), '',
+          f'Command: `{meta["command"]}` — {len(rows)} localizations in {meta["wall_time_s"]} s with '
+          f'{meta["jobs"]} worker processes (OpenCV single-threaded in each).', '',
+          '| machine | |', '|---|---|'] + [f'| {k} | {v} |' for k, v in meta['machine'].items()] + ['']
+    md += ['Success: position error < 0.2 m and heading error < 5° (the thesis criterion), also 0.5 m / 10°. '
+           '"Marked success but wrong": the result says `success` but misses 0.2 m / 5° (share of all trials). '
+           f'"time / baseline": median time over the thesis baseline ({BASELINE}, Δα = 5°) on the same trials '
+           'of the same run (< 1 is faster).', '',
+           'Maps: ' + ', '.join(f'{n} ({v})' for n, v in meta['maps'].items()) + '.', '']
+
+    if 'sim' in by_suite:
+        sim = by_suite['sim']
+        md += ['## Suite 2: simulated scans (pybullet Pioneer 3-DX, thesis §4.2)', '',
+               'Scans from the pybullet simulator (0.01 m range noise, 1% dropouts) at seeded free poses, '
+               'one factor varied at a time around 270° / 20 m / Δα 5°; "clutter 8": eight chairs, bins and '
+               'people not in the map. All maps pooled:', '',
+               method_table(sim, cond_label, 'condition', methods), '',
+               'Per map, 270° / 20 m / Δα 5°:', '',
+               method_table([r for r in sim if r['fov'] == 270 and r['range'] == 20 and r['angle_step'] == 5
+                             and not r['clutter']], lambda r: r['map'], 'map', methods), '',
+               '![success by factor](sim_factors.png)', '', '![time by map](sim_time.png)', '']
+        plot_sim(sim, methods, out)
+    if 'cut' in by_suite:
+        cut = by_suite['cut']
+        md += ['## Suite 1: local maps cut from the map (thesis §4.1)', '',
+               'The map\'s own wall surfaces within 3, 6 or 10 m of a seeded free pose, in the pose\'s frame: '
+               'a perfect scan, the upper bound for each method.', '',
+               method_table(cut, lambda r: f'r = {r["radius"]:.0f} m / Δα {r["angle_step"]:g}°', 'cut', methods), '',
+               '![time against local map size](cut_time_vs_size.png)', '']
+        plot_cut(cut, methods, out)
+    if 'carmen' in by_suite:
+        car = by_suite['carmen']
+        filt = meta.get('carmen_filters', {})
+        md += ['## Suite 3: real laser logs (CARMEN, held-out folds)', '',
+               'Each log is cut into 5 time blocks; a scan is localized in the map (5 cm) built from the *other* '
+               'four blocks, never in a map that contains it. Kept: scans whose reference pose lies on mapped '
+               'free space and at least 70% of whose returns lie within two cells of a mapped wall.', '',
+               '| log | scans | pose on free space | explained by map | sampled |', '|---|---|---|---|---|'] + \
+              [f'| {log} | {c["scans"]} | {c["pose_on_free_space"]} | {c["explained_by_map"]} | {c["sampled"]} |'
+               for log, c in filt.items()] + \
+              ['', method_table(car, lambda r: r['log'], 'log', methods), '',
+               'Top-4 (truth among the first four hypotheses), useful for ACES, which is nearly four-fold symmetric:', '',
+               '| log | ' + ' | '.join(methods) + ' |', '|---|' + '---|' * len(methods)] + \
+              [f'| {log} | ' + ' | '.join(pct(stats([r for r in lr if r['method'] == m])['top4']) for m in methods) + ' |'
+               for log, lr in sorted(group(car, lambda r: r['log']).items())] + \
+              ['', '![success per log](carmen.png)', '']
+        plot_carmen(car, methods, out)
+    md += failure_pictures(rows, trials, maps, out)
+    with open(os.path.join(out, 'REPORT.md'), 'w') as f:
+        f.write('\n'.join(md) + '\n')
+
+
+def bars(ax, groups: dict, methods, value, title, ylabel):
+    labels = list(groups)
+    width = 0.8 / max(len(methods), 1)
+    for i, m in enumerate(methods):
+        vals = [value([r for r in groups[g] if r['method'] == m]) for g in labels]
+        ax.bar(np.arange(len(labels)) + i * width, vals, width, label=m)
+    ax.set_xticks(np.arange(len(labels)) + 0.4 - width / 2)
+    ax.set_xticklabels([str(g) for g in labels], fontsize=8)
+    ax.set_title(title, fontsize=9)
+    ax.set_ylabel(ylabel, fontsize=8)
+
+
+def plot_sim(rows, methods, out):
+    ok = lambda rs: stats(rs)['ok'] if rs else 0.0  # noqa: E731
+    base = dict(fov=270, range=20, angle_step=5, clutter=0)
+
+    def vary(key):
+        keep = [r for r in rows if all(r[k] == v for k, v in base.items() if k != key)]
+        return dict(sorted(group(keep, lambda r: r[key]).items()))
+
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7))
+    for ax, (key, title) in zip(axes.ravel(), [('fov', 'field of view [deg] (20 m, Δα 5°)'),
+                                               ('range', 'max range [m] (270°, Δα 5°)'),
+                                               ('angle_step', 'Δα [deg] (270°, 20 m)'),
+                                               ('clutter', 'clutter objects (270°, 20 m, Δα 5°)')]):
+        bars(ax, vary(key), methods, ok, title, 'success (0.2 m / 5°)')
+        ax.set_ylim(0, 1)
+    axes[0, 0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, 'sim_factors.png'), dpi=100)
+    plt.close(fig)
+    fig, ax = plt.subplots(figsize=(10, 4))
+    keep = [r for r in rows if all(r[k] == v for k, v in base.items())]
+    bars(ax, dict(sorted(group(keep, lambda r: r['map']).items())), methods, lambda rs: stats(rs)['median'] if rs else 0,
+         'median time per localization, 270° / 20 m / Δα 5°', 'seconds')
+    ax.set_yscale('log')
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, 'sim_time.png'), dpi=100)
+    plt.close(fig)
+
+
+def plot_cut(rows, methods, out):
+    fig, ax = plt.subplots(figsize=(8, 5))
+    for m in methods:
+        for step, marker in ((5, 'o'), (15, 's')):
+            g = group([r for r in rows if r['method'] == m and r['angle_step'] == step], lambda r: r['local_map_cells'])
+            if not g:
+                continue
+            xs = sorted(g)
+            ax.plot(xs, [stats(g[x])['median'] for x in xs], marker=marker, label=f'{m}, Δα {step}°')
+    ax.set_xlabel('local map size [cells] (side = 2 x radius)')
+    ax.set_ylabel('median time [s]')
+    ax.set_xscale('log')
+    ax.set_yscale('log')
+    ax.legend(fontsize=7)
+    ax.set_title('time against local map size (thesis figs. 4.7/4.8)', fontsize=9)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, 'cut_time_vs_size.png'), dpi=100)
+    plt.close(fig)
+
+
+def plot_carmen(rows, methods, out):
+    fig, ax = plt.subplots(figsize=(8, 4))
+    bars(ax, dict(sorted(group(rows, lambda r: r['log']).items())), methods,
+         lambda rs: stats(rs)['ok'] if rs else 0, 'real logs, held-out folds', 'success (0.2 m / 5°)')
+    ax.set_ylim(0, 1)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, 'carmen.png'), dpi=100)
+    plt.close(fig)
+
+
+def failure_pictures(rows, trials, maps, out, count=2) -> list[str]:
+    """Pictures of typical failures of the baseline: wrong and marked successful first."""
+    wrong = [r for r in rows if r['method'] == BASELINE and not r['ok'] and 'estimate' in r and r['suite'] != 'cut']
+    wrong.sort(key=lambda r: (not r['success'], r['suite'], r['trial']))
+    md = ['## Typical failures', ''] if wrong else []
+    for i, r in enumerate(wrong[:count]):
+        t = trials[r['trial']]
+        path = os.path.join(out, f'failure_{i + 1}.png')
+        plot_localization(path, maps[t.map_name], scan_to_points(t.scan).points, Rigid2D(*r['estimate']), t.truth,
+                          base_T_laser=t.base_T_laser,
+                          title=f'{r["suite"]} / {r["map"]}: {BASELINE} {r["err_xy"]:.1f} m, {r["err_yaw_deg"]:.0f}° off, '
+                                f'score {r["score"]:.2f}, success={r["success"]}')
+        md += [f'![failure {i + 1}](failure_{i + 1}.png)', '',
+               f'{r["suite"]} on {r["map"]}: {r["err_xy"]:.2f} m and {r["err_yaw_deg"]:.1f}° off, '
+               f'confidence {r["confidence"]:.2f}, marked success: {r["success"]}.', '']
+    return md
