@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 from .base import Candidate, Cancelled, Matcher, MatchOptions, MethodError
+from .bnb import BranchAndBoundMatcher
 from .features import FeatureMatcher, surf_available
 from .template import ccoeff_matcher, sqdiff_matcher
 
 _FACTORIES = {
+    'bnb': BranchAndBoundMatcher,
     'template_ccoeff': ccoeff_matcher,
     'template_sqdiff': sqdiff_matcher,
     'features_orb': lambda m: FeatureMatcher(m, 'orb'),

@@ -1,0 +1,262 @@
+"""Exact global search by multi-resolution branch and bound over (x, y, yaw), after
+Cartographer's FastCorrelativeScanMatcher2D (Hess et al. 2016), then sub-cell refinement.
+
+Scoring: the scan's points against a likelihood field of the map (exp(-d^2 / 2 sigma^2)
+of the distance d to the nearest occupied cell), not a rasterized image of the scan.
+The score of a pose is the field's mean over the scan's points, in [0, 1]: about the
+fraction of the scan the map explains.
+
+Search: leaf poses are the laser on a cell centre at angles k * d0, d0 = acos(1 -
+res^2 / (2 r_max^2)) (a point at the scan's largest range moves at most one cell
+between neighbouring angles). A node at level h covers 2^h x 2^h cells and 2^h angles;
+its bound reads the scan, rotated to the node's middle angle, from grids whose cells
+hold the field's maximum over the block, widened by the rotation's reach: a point at
+range r moves at most (2^h - 1) / 2 * r / r_max cells over the node's angles, plus one
+cell of rounding, so each point reads the grid widened just enough for its own range
+(near points, most of an indoor scan, get tight bounds). A bound is never below any leaf under
+it, and pruning by bound loses no pose scoring above the pruning threshold: the search
+is exact at cell and d0 resolution. The laser must stand on a free cell of the map.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.ndimage import map_coordinates
+from scipy.optimize import minimize
+
+from ..map_io import OccupancyMap
+from ..transform import Rigid2D
+from .base import Candidate, Matcher
+
+
+@dataclass
+class BranchAndBoundOptions:
+    sigma_cells: float = 1.5       # likelihood field width, cells
+    levels: int = 7                # blocks of 1 .. 64 cells
+    max_points: int = 360          # scan points kept after the one-cell voxel filter
+    keep_ratio: float = 0.95       # nodes bounded above keep_ratio x best score are explored:
+                                   # every pose scoring that high is found (the hypotheses)
+    max_nodes: int = 60000         # per level; past it only the best bounds go on (then inexact)
+    hypotheses: int = 8            # distinct poses refined and returned
+    distinct_cells: float = 16.0   # poses closer than this (and < distinct_angle) are one peak
+    distinct_angle: float = math.radians(20.0)
+
+
+MARGINS = (0, 1, 2, 3, 5, 9, 17, 33)   # widenings (cells) for which grids are kept
+
+
+class PrecomputationGridStack:
+    """Per map, built once: the likelihood field, max-pooled uint8 grids per level and
+    widening, and per level whether a block holds a free cell. Memory: `nbytes`."""
+
+    def __init__(self, occupancy_map: OccupancyMap, options: BranchAndBoundOptions):
+        self.options = options
+        occupied = occupancy_map.occupied
+        dist = cv2.distanceTransform((~occupied).astype(np.uint8), cv2.DIST_L2, 5) if occupied.any() \
+            else np.full(occupied.shape, 1e6, np.float32)
+        self.field = np.exp(-(dist.astype(np.float32) ** 2) / (2.0 * options.sigma_cells ** 2))
+        top = options.levels - 1
+        self.pad = (2 ** top) + 2 * self.margin(top) + 2
+        p = self.pad
+        base = cv2.copyMakeBorder(np.rint(self.field * 255).astype(np.uint8), p, p, p, p, cv2.BORDER_CONSTANT, value=0)
+        free = occupancy_map.free.astype(np.uint8)
+        free = cv2.copyMakeBorder(free, p, p, p, p, cv2.BORDER_CONSTANT, value=0)
+        self.grids, self.free_blocks = {}, []
+        for h in range(options.levels):
+            size = 2 ** h
+            for m in MARGINS:
+                width = size + 2 * m
+                self.grids[h, m] = base if width == 1 else \
+                    cv2.dilate(base, np.ones((width, width), np.uint8), anchor=(m, m))
+                if m >= self.margin(h):
+                    break
+            # dilate's window at (x, y) spans [x - anchor, x - anchor + size): the block itself
+            self.free_blocks.append(free if size == 1 else
+                                    cv2.dilate(free, np.ones((size, size), np.uint8), anchor=(0, 0)))
+        self.nbytes = self.field.nbytes + sum(g.nbytes for g in self.grids.values() if g is not base) + \
+            base.nbytes + sum(f.nbytes for f in self.free_blocks)
+
+    @staticmethod
+    def margin(level: int, range_fraction: float = 1.0) -> int:
+        """Cells a point at range_fraction x r_max may move within a level-`level` node's
+        angles, plus one of rounding."""
+        return 0 if level == 0 else int(math.ceil((2 ** level - 1) / 2.0 * range_fraction + 1e-3)) + 1
+
+    def margin_groups(self, level: int, ranges: np.ndarray, r_max: float) -> list[tuple[int, np.ndarray]]:
+        """(widening, indices of the points that need it) for one level."""
+        need = np.array([self.margin(level, r / r_max) for r in ranges])
+        available = np.array([m for m in MARGINS if (level, m) in self.grids])
+        use = available[np.searchsorted(available, need)]
+        return [(int(m), np.flatnonzero(use == m)) for m in np.unique(use)]
+
+
+class BranchAndBoundMatcher(Matcher):
+    name = 'bnb'
+    min_score = 0.0
+
+    def __init__(self, occupancy_map: OccupancyMap, options: BranchAndBoundOptions | None = None):
+        super().__init__(occupancy_map)
+        self.options = options or BranchAndBoundOptions()
+        self.stack = PrecomputationGridStack(occupancy_map, self.options)
+
+    # ---- scan preparation --------------------------------------------------------
+    def prepare(self, points: np.ndarray) -> np.ndarray:
+        """One point per cell (voxel filter), at most max_points of them, evenly chosen."""
+        res = self.map.resolution
+        keys = np.floor(points / res).astype(np.int64)
+        _, first = np.unique(keys, axis=0, return_index=True)
+        pts = points[np.sort(first)]
+        if len(pts) > self.options.max_points:
+            pts = pts[np.linspace(0, len(pts) - 1, self.options.max_points).astype(int)]
+        return pts
+
+    def offsets(self, pts: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray]:
+        """Pixel offsets (du, dv) of the points rotated by `angle` in the map's grid frame."""
+        c, s = math.cos(angle), math.sin(angle)
+        x = (c * pts[:, 0] - s * pts[:, 1]) / self.map.resolution
+        y = (s * pts[:, 0] + c * pts[:, 1]) / self.map.resolution
+        return np.rint(x).astype(np.int64), np.rint(-y).astype(np.int64)
+
+    # ---- scoring -------------------------------------------------------------------
+    def bounds(self, level: int, tu, tv, ta, pts, d0) -> np.ndarray:
+        """Bounds (level > 0) or exact scores (level 0) of nodes (tu, tv, ta), in [0, 1]."""
+        p = self.stack.pad
+        ranges = np.hypot(pts[:, 0], pts[:, 1])
+        groups = self.stack.margin_groups(level, ranges, max(float(ranges.max()), 1e-9))
+        out = np.zeros(len(tu), np.float64)
+        mid = (2 ** level - 1) / 2.0
+        for a in np.unique(ta):
+            sel = np.flatnonzero(ta == a)
+            du, dv = self.offsets(pts, (a + mid) * d0)
+            for m, idx in groups:
+                grid = self.stack.grids[level, m]
+                hi_v, hi_u = grid.shape[0] - 1, grid.shape[1] - 1
+                for chunk in np.array_split(sel, max(1, len(sel) * len(idx) // 2_000_000 + 1)):
+                    u = np.clip(tu[chunk, None] + du[None, idx] + p, 0, hi_u)
+                    v = np.clip(tv[chunk, None] + dv[None, idx] + p, 0, hi_v)
+                    out[chunk] += grid[v, u].sum(axis=1, dtype=np.int64)
+        return out / (255.0 * len(pts))
+
+    def free(self, level: int, tu, tv) -> np.ndarray:
+        p = self.stack.pad
+        return self.stack.free_blocks[level][tv + p, tu + p] > 0
+
+    @staticmethod
+    def children(tu, tv, ta, level):
+        """The 8 children (4 blocks x 2 angle halves) of each level-`level` node."""
+        half = 2 ** (level - 1)
+        du = np.array([0, half, 0, half, 0, half, 0, half])
+        dv = np.array([0, 0, half, half, 0, 0, half, half])
+        da = np.array([0, 0, 0, 0, half, half, half, half])
+        return ((tu[:, None] + du).ravel(), (tv[:, None] + dv).ravel(), (ta[:, None] + da).ravel())
+
+    # ---- search --------------------------------------------------------------------
+    def match(self, points, options, progress=None):
+        opt = self.options
+        pts = self.prepare(points.points)
+        if len(pts) < 3:
+            return []
+        res = self.map.resolution
+        r_max = max(float(np.hypot(pts[:, 0], pts[:, 1]).max()), 3 * res)
+        top = opt.levels - 1
+        n_angles = int(math.ceil(2 * math.pi / math.acos(1 - res ** 2 / (2 * r_max ** 2)) / 2 ** top)) * 2 ** top
+        d0 = 2 * math.pi / n_angles
+        step = 2 ** top
+        gu, gv, ga = np.meshgrid(np.arange(0, self.map.width, step), np.arange(0, self.map.height, step),
+                                 np.arange(0, n_angles, step), indexing='ij')
+        tu, tv, ta = gu.ravel(), gv.ravel(), ga.ravel()
+        keep = self.free(top, tu, tv)
+        tu, tv, ta = tu[keep], tv[keep], ta[keep]
+        if len(tu) == 0:
+            return []
+        b = self.bounds(top, tu, tv, ta, pts, d0)
+        lower = self.beam_lower_bound(tu, tv, ta, b, pts, d0)
+        exact = True
+        for level in range(top, 0, -1):
+            keep = b >= opt.keep_ratio * lower
+            tu, tv, ta, b = tu[keep], tv[keep], ta[keep], b[keep]
+            if len(tu) * 8 > opt.max_nodes:
+                order = np.argsort(-b)[:opt.max_nodes // 8]
+                tu, tv, ta, b = tu[order], tv[order], ta[order], b[order]
+                exact = False
+            tu, tv, ta = self.children(tu, tv, ta, level)
+            ok = (tu < self.map.width) & (tv < self.map.height) & (ta < n_angles)
+            tu, tv, ta = tu[ok], tv[ok], ta[ok]
+            ok = self.free(level - 1, tu, tv)
+            tu, tv, ta = tu[ok], tv[ok], ta[ok]
+            b = self.bounds(level - 1, tu, tv, ta, pts, d0)
+            if level - 1 == 0 and len(b):
+                lower = max(lower, float(b.max()))
+            if progress:
+                progress((top - level + 1) / (top + 1), lower)
+        self.last_search = {'exact': exact, 'angles': n_angles, 'points': len(pts), 'leaves': len(b),
+                            'best_leaf': float(b.max()) if len(b) else 0.0}
+        return self.refine_peaks(tu, tv, ta, b, pts, d0, progress)
+
+    def beam_lower_bound(self, tu, tv, ta, b, pts, d0, beam: int = 256) -> float:
+        """Score of the best leaf reached by descending from the `beam` best-bounded
+        nodes, keeping the `beam` best children at each level: a score some pose really
+        has, so pruning below it (times keep_ratio) is safe, and usually near the best."""
+        n_angles = int(round(2 * math.pi / d0))
+        order = np.argsort(-b)[:beam]
+        cu, cv, ca = tu[order], tv[order], ta[order]
+        best = np.zeros(0)
+        for level in range(self.options.levels - 1, 0, -1):
+            u, v, a = self.children(cu, cv, ca, level)
+            ok = (u < self.map.width) & (v < self.map.height) & (a < n_angles)
+            u, v, a = u[ok], v[ok], a[ok]
+            ok = self.free(level - 1, u, v)
+            u, v, a = u[ok], v[ok], a[ok]
+            best = self.bounds(level - 1, u, v, a, pts, d0)
+            order = np.argsort(-best)[:beam]
+            cu, cv, ca, best = u[order], v[order], a[order], best[order]
+        return float(best.max()) if len(best) else 0.0
+
+    # ---- peaks and refinement ----------------------------------------------------
+    def refine_peaks(self, tu, tv, ta, scores, pts, d0, progress):
+        opt = self.options
+        order = np.argsort(-scores)
+        kept = []
+        for i in order:
+            if all(math.hypot(tu[i] - tu[j], tv[i] - tv[j]) >= opt.distinct_cells or
+                   abs(math.remainder((ta[i] - ta[j]) * d0, 2 * math.pi)) >= opt.distinct_angle for j in kept):
+                kept.append(i)
+                if len(kept) == opt.hypotheses:
+                    break
+        out = []
+        for i in kept:
+            u, v, yaw, score = self.refine(float(tu[i]), float(tv[i]), float(ta[i] * d0), pts)
+            out.append(Candidate(self.laser_pose(u, v, yaw), score))
+        if progress:
+            progress(1.0, out[0].score if out else 0.0)
+        out.sort(key=lambda c: -c.score)
+        return out
+
+    def mean_field(self, u, v, yaw, pts) -> float:
+        c, s = math.cos(yaw), math.sin(yaw)
+        res = self.map.resolution
+        x = u + (c * pts[:, 0] - s * pts[:, 1]) / res
+        y = v - (s * pts[:, 0] + c * pts[:, 1]) / res
+        return float(map_coordinates(self.stack.field, [y, x], order=1, mode='constant', cval=0.0).mean())
+
+    def refine(self, u, v, yaw, pts):
+        """Sub-cell pose maximizing the interpolated field (Nelder-Mead within a cell)."""
+        res = self.map.resolution
+        scale = np.array([1.0, 1.0, res / max(float(np.hypot(pts[:, 0], pts[:, 1]).max()), res)])
+
+        def cost(z):
+            return -self.mean_field(u + z[0], v + z[1], yaw + z[2] * scale[2], pts)
+
+        r = minimize(cost, np.zeros(3), method='Nelder-Mead',
+                     options={'xatol': 0.02, 'fatol': 1e-5, 'initial_simplex': np.array(
+                         [[0, 0, 0], [0.5, 0, 0], [0, 0.5, 0], [0, 0, 0.5]]), 'maxiter': 200})
+        z = r.x if -r.fun >= -cost(np.zeros(3)) else np.zeros(3)
+        return u + z[0], v + z[1], yaw + z[2] * scale[2], -cost(z)
+
+    def laser_pose(self, u: float, v: float, yaw: float) -> Rigid2D:
+        """Laser at continuous pixel (u, v) with grid-frame heading yaw -> map frame."""
+        gx, gy = self.map.pixel_to_grid([[u, v]])[0]
+        return self.map.origin * Rigid2D(float(gx), float(gy), yaw)
