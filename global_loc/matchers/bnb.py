@@ -39,7 +39,7 @@ class BranchAndBoundOptions:
     max_points: int = 360          # scan points kept after the one-cell voxel filter
     keep_ratio: float = 0.95       # nodes bounded above keep_ratio x best score are explored:
                                    # every pose scoring that high is found (the hypotheses)
-    max_nodes: int = 60000         # per level; past it only the best bounds go on (then inexact)
+    max_nodes: int = 40000         # expansions; past it the search stops (and says it was not exhaustive)
     hypotheses: int = 8            # distinct poses refined and returned
     distinct_cells: float = 16.0   # poses closer than this (and < distinct_angle) are one peak
     distinct_angle: float = math.radians(20.0)
@@ -181,47 +181,61 @@ class BranchAndBoundMatcher(Matcher):
         if len(tu) == 0:
             return []
         b = self.bounds(top, tu, tv, ta, pts, d0)
-        lower = self.beam_lower_bound(tu, tv, ta, b, pts, d0)
-        exact = True
-        for level in range(top, 0, -1):
-            keep = b >= opt.keep_ratio * lower
-            tu, tv, ta, b = tu[keep], tv[keep], ta[keep], b[keep]
-            if len(tu) * 8 > opt.max_nodes:
-                order = np.argsort(-b)[:opt.max_nodes // 8]
-                tu, tv, ta, b = tu[order], tv[order], ta[order], b[order]
-                exact = False
-            tu, tv, ta = self.children(tu, tv, ta, level)
-            ok = (tu < self.map.width) & (tv < self.map.height) & (ta < n_angles)
-            tu, tv, ta = tu[ok], tv[ok], ta[ok]
-            ok = self.free(level - 1, tu, tv)
-            tu, tv, ta = tu[ok], tv[ok], ta[ok]
-            b = self.bounds(level - 1, tu, tv, ta, pts, d0)
-            if level - 1 == 0 and len(b):
-                lower = max(lower, float(b.max()))
-            if progress:
-                progress((top - level + 1) / (top + 1), lower)
-        self.last_search = {'exact': exact, 'angles': n_angles, 'points': len(pts), 'leaves': len(b),
-                            'best_leaf': float(b.max()) if len(b) else 0.0}
-        return self.refine_peaks(tu, tv, ta, b, pts, d0, progress)
+        leaves, exact = self.best_first(tu, tv, ta, b, top, pts, d0, n_angles, progress)
+        lu, lv, la, ls = leaves
+        self.last_search = {'exact': exact, 'angles': n_angles, 'points': len(pts), 'leaves': len(ls),
+                            'best_leaf': float(ls.max()) if len(ls) else 0.0}
+        return self.refine_peaks(lu, lv, la, ls, pts, d0, progress)
 
-    def beam_lower_bound(self, tu, tv, ta, b, pts, d0, beam: int = 256) -> float:
-        """Score of the best leaf reached by descending from the `beam` best-bounded
-        nodes, keeping the `beam` best children at each level: a score some pose really
-        has, so pruning below it (times keep_ratio) is safe, and usually near the best."""
-        n_angles = int(round(2 * math.pi / d0))
-        order = np.argsort(-b)[:beam]
-        cu, cv, ca = tu[order], tv[order], ta[order]
-        best = np.zeros(0)
-        for level in range(self.options.levels - 1, 0, -1):
-            u, v, a = self.children(cu, cv, ca, level)
-            ok = (u < self.map.width) & (v < self.map.height) & (a < n_angles)
-            u, v, a = u[ok], v[ok], a[ok]
-            ok = self.free(level - 1, u, v)
-            u, v, a = u[ok], v[ok], a[ok]
-            best = self.bounds(level - 1, u, v, a, pts, d0)
-            order = np.argsort(-best)[:beam]
-            cu, cv, ca, best = u[order], v[order], a[order], best[order]
-        return float(best.max()) if len(best) else 0.0
+    def best_first(self, tu, tv, ta, b, top, pts, d0, n_angles, progress, batch: int = 256):
+        """Branch and bound, best bound first, `batch` nodes expanded at a time. Every
+        node whose bound reaches keep_ratio x the best leaf so far is expanded; returns
+        the leaves scoring that high (u, v, angle index, score) and whether the search
+        was exhaustive (False when max_nodes stopped it)."""
+        opt = self.options
+        level = np.full(len(tu), top, np.int8)
+        lower, expanded = 0.0, 0
+        found = [np.zeros(0, np.int64)] * 3 + [np.zeros(0)]
+        while len(b):
+            threshold = opt.keep_ratio * lower
+            live = b >= threshold
+            tu, tv, ta, b, level = tu[live], tv[live], ta[live], b[live], level[live]
+            if not len(b):
+                break
+            if expanded >= opt.max_nodes:
+                return self._keep(found, threshold), False
+            pick = np.argpartition(-b, batch - 1)[:batch] if len(b) > batch else np.arange(len(b))
+            rest = np.ones(len(b), bool)
+            rest[pick] = False
+            new = []
+            for h in np.unique(level[pick]):
+                sel = pick[level[pick] == h]
+                u, v, a = self.children(tu[sel], tv[sel], ta[sel], int(h))
+                ok = (u < self.map.width) & (v < self.map.height) & (a < n_angles)
+                u, v, a = u[ok], v[ok], a[ok]
+                ok = self.free(int(h) - 1, u, v)
+                u, v, a = u[ok], v[ok], a[ok]
+                cb = self.bounds(int(h) - 1, u, v, a, pts, d0)
+                expanded += len(sel)
+                if h == 1:   # children are leaves: exact scores
+                    if len(cb):
+                        lower = max(lower, float(cb.max()))
+                    found = [np.concatenate([f, x]) for f, x in zip(found, (u, v, a, cb))]
+                    found = self._keep(found, opt.keep_ratio * lower)
+                else:
+                    new.append((u, v, a, cb, np.full(len(u), h - 1, np.int8)))
+            tu, tv, ta, b, level = tu[rest], tv[rest], ta[rest], b[rest], level[rest]
+            for u, v, a, cb, lv in new:
+                tu, tv, ta = np.concatenate([tu, u]), np.concatenate([tv, v]), np.concatenate([ta, a])
+                b, level = np.concatenate([b, cb]), np.concatenate([level, lv])
+            if progress:
+                progress(min(0.95, expanded / opt.max_nodes), lower)
+        return self._keep(found, opt.keep_ratio * lower), True
+
+    @staticmethod
+    def _keep(found, threshold):
+        keep = found[3] >= threshold
+        return [f[keep] for f in found]
 
     # ---- peaks and refinement ----------------------------------------------------
     def refine_peaks(self, tu, tv, ta, scores, pts, d0, progress):
