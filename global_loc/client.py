@@ -28,6 +28,8 @@ def parse_args(argv):
     parser.add_argument('--angle-step', type=float, default=0.0, help="Δα in degrees (default: the server's)")
     parser.add_argument('--timeout', type=float, default=0.0, help="seconds to wait for a scan (default: the server's)")
     parser.add_argument('--no-publish', action='store_true', help='do not publish the pose on /initialpose')
+    parser.add_argument('--publish-if-ambiguous', action='store_true',
+                        help='publish the best hypothesis even when the server is not confident')
     parser.add_argument('--server-timeout', type=float, default=10.0, help='seconds to wait for the server')
     parser.add_argument('--cancel-after', type=float, default=0.0, help='cancel the goal after this many seconds')
     parser.add_argument('--action', default='localize', help='action name')
@@ -45,7 +47,7 @@ def run(node, args) -> int:
               f'(is `ros2 run global_loc server` running, with the same ROS_DOMAIN_ID?)', file=sys.stderr)
         return 2
     goal = Localize.Goal(method=args.method, angle_step_deg=args.angle_step, timeout_s=args.timeout,
-                         publish_initialpose=not args.no_publish)
+                         publish_initialpose=not args.no_publish, publish_if_ambiguous=args.publish_if_ambiguous)
     last_stage = ['']
 
     def on_feedback(fb):

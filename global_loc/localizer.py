@@ -17,13 +17,13 @@ from .map_io import OccupancyMap
 from .matchers import Candidate, MatchOptions, make_matcher, resolve_method
 from .matchers.base import ProgressFn
 from .scan import Scan, ScanPoints, scan_to_points
-from .transform import Rigid2D, normalize_angle
+from .transform import Rigid2D, covariance_of_composition, normalize_angle
 
 
 @dataclass
 class LocalizerConfig:
     """Every knob of the pipeline, documented once; ROS parameters and CLI flags fill it."""
-    method: str = 'template_ccoeff'        # matcher name, see matchers.method_names()
+    method: str = 'bnb'                    # matcher name, see matchers.method_names()
     angle_step_deg: float = 5.0            # Δα of the rotated-template matcher
     opening_kernel: int = 3                # morphological opening of the local map, pixels (0 = off)
     num_hypotheses: int = 5                # distinct hypotheses returned
@@ -68,15 +68,6 @@ def distinct(candidates: list[Candidate], k: int, min_distance: float, min_angle
     return kept
 
 
-def margin_confidence(scores: list[float]) -> float:
-    """0..1: how far the best score stands above the next distinct hypothesis."""
-    if not scores or scores[0] <= 0:
-        return 0.0
-    if len(scores) == 1:
-        return 1.0
-    return float(np.clip((scores[0] - scores[1]) / scores[0], 0.0, 1.0))
-
-
 class Localizer:
     def __init__(self, occupancy_map: OccupancyMap, config: Optional[LocalizerConfig] = None):
         self.map = occupancy_map
@@ -119,14 +110,13 @@ class Localizer:
         result = LocalizationResult(False, '', matcher.name, time_s=elapsed, dropped=points.dropped,
                                     hypotheses=hyps,
                                     covariance=np.diag([cfg.covariance_xy, cfg.covariance_xy, cfg.covariance_yaw]))
+        verdict = matcher.judge([h.score for h in hyps])
+        result.success, result.confidence, result.message = verdict.success, verdict.confidence, verdict.message
         if not hyps:
-            result.message = f'{matcher.name} found no match'
             return result
         result.pose, result.score = hyps[0].pose, hyps[0].score
-        result.confidence = margin_confidence([h.score for h in hyps])
-        result.success = hyps[0].score >= matcher.min_score
-        result.message = 'localized' if result.success else \
-            f'best score {hyps[0].score:.3f} is below {matcher.name}\'s minimum {matcher.min_score}'
+        if best[0].covariance is not None:
+            result.covariance = covariance_of_composition(best[0].laser_pose, best[0].covariance, laser_T_base)
         return result
 
 

@@ -253,7 +253,7 @@ class GlobalLocServer(Node):
         p = result.pose
         summary = (f'{result.message}: x={p.x:.3f} y={p.y:.3f} yaw={math.degrees(p.yaw):.1f} deg, '
                    f'score {result.score:.3f}, {result.time_s:.2f} s') if p else result.message
-        if result.success and goal.publish_initialpose:
+        if result.pose is not None and goal.publish_initialpose and (result.success or goal.publish_if_ambiguous):
             self.initialpose_pub.publish(out.pose)
             summary += f'; published on {self.initialpose_topic}'
         self.get_logger().info(summary)

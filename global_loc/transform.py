@@ -60,3 +60,13 @@ class Rigid2D:
 
     def as_tuple(self) -> tuple[float, float, float]:
         return (self.x, self.y, self.yaw)
+
+
+def covariance_of_composition(pose: Rigid2D, covariance, child: Rigid2D) -> np.ndarray:
+    """Covariance (x, y, yaw) of `pose * child` when `pose` has `covariance` and `child`
+    is exact (e.g. laser pose -> base pose): first-order, J C J^T."""
+    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+    j = np.array([[1.0, 0.0, -s * child.x - c * child.y],
+                  [0.0, 1.0, c * child.x - s * child.y],
+                  [0.0, 0.0, 1.0]])
+    return j @ np.asarray(covariance, dtype=float) @ j.T

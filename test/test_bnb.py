@@ -76,3 +76,53 @@ def test_bnb_localizes_raycast_scans_on_the_office(office_map):
         result = localizer.localize(scan, method='bnb')
         errors.append(pose_error(result.pose, truth))
     assert all(d < 0.1 and a < 2.0 for d, a in errors), errors
+
+
+def symmetric_room():
+    """A 6 x 6 m square room with four identical pillars placed four-fold symmetrically."""
+    n = 120
+    grid = np.zeros((n, n), dtype=int)
+    grid[0, :] = grid[-1, :] = grid[:, 0] = grid[:, -1] = 100
+    for r, c in ((30, 30), (30, 86), (86, 30), (86, 86)):
+        grid[r:r + 4, c:c + 4] = 100
+    return from_occupancy_grid(n, n, 0.05, (0.0, 0.0, 0.0), grid.ravel())
+
+
+def test_four_fold_symmetric_room_is_ambiguous_with_the_truth_among_the_hypotheses():
+    m = symmetric_room()
+    truth = Rigid2D(2.0, 1.4, 0.4)
+    scan = simulate_scan(m, truth, 360.0, 720, 10.0, noise_std=0.005, rng=np.random.default_rng(3))
+    result = Localizer(m).localize(scan, method='bnb')
+    assert not result.success
+    assert result.message.startswith('ambiguous')
+    assert len(result.hypotheses) >= 4
+    errors = [pose_error(h.pose, truth) for h in result.hypotheses[:4]]
+    assert any(d < 0.1 and a < 2.0 for d, a in errors), errors
+    yaws = sorted(math.degrees(h.pose.yaw) % 360 for h in result.hypotheses[:4])
+    gaps = np.diff(yaws + [yaws[0] + 360])
+    assert np.allclose(gaps, 90, atol=3), yaws     # the four peaks are 90 deg apart
+
+
+def test_confident_result_has_a_positive_definite_covariance_from_the_landscape(office_map):
+    truth = Rigid2D(3.0, 4.0, 0.7)
+    scan = simulate_scan(office_map, truth, 270.0, 541, 20.0, noise_std=0.01, rng=np.random.default_rng(4))
+    result = Localizer(office_map).localize(scan, method='bnb')
+    assert result.success and result.message == 'localized' and result.confidence >= 0.5
+    cov = result.covariance
+    assert np.allclose(cov, cov.T) and np.all(np.linalg.eigvalsh(cov) > 0)
+    assert 1e-5 < cov[0, 0] < 0.05 and 1e-7 < cov[2, 2] < 0.01      # cm-level, not the fixed 0.25 m^2
+
+
+def test_covariance_of_composition_matches_a_numeric_jacobian():
+    from global_loc.transform import covariance_of_composition
+    pose, child = Rigid2D(1.0, 2.0, 0.8), Rigid2D(0.16, -0.05, 0.0)
+    cov = np.diag([0.01, 0.02, 0.003])
+    eps = 1e-6
+    jac = np.zeros((3, 3))
+    for i in range(3):
+        d = np.zeros(3)
+        d[i] = eps
+        plus = Rigid2D(*(np.array(pose.as_tuple()) + d)) * child
+        minus = Rigid2D(*(np.array(pose.as_tuple()) - d)) * child
+        jac[:, i] = (np.array(plus.as_tuple()) - np.array(minus.as_tuple())) / (2 * eps)
+    assert covariance_of_composition(pose, cov, child) == pytest.approx(jac @ cov @ jac.T, abs=1e-9)

@@ -11,11 +11,9 @@ from global_loc.ros_convert import pose_from_msg, pose_to_msg
 from global_loc.sim.simulator import BASE_T_LASER
 from global_loc.transform import Rigid2D
 
-# Places where the default (thesis) matcher was right in 6 of 6 noisy 360 deg pybullet scans
-# (12 of 12 for the first with clutter); elsewhere it is often wrong, e.g. 0 of 6 at
-# (18.0, 4.5, -2.2), where twin rooms tie; at (12.0, 8.0, -2.0) it is right with a score
-# below its minimum, so it publishes nothing. A 360 deg laser, as the thesis wished for.
-KIDNAP_POSES = [Rigid2D(3.0, 4.0, 0.7), Rigid2D(20.0, 12.5, 2.5)]
+# Kidnap poses. The default matcher (bnb) finds the office's places; (18.0, 4.5, -2.2) is
+# one where the thesis's matcher ties twin rooms (0 of 6 right with 360 deg scans).
+KIDNAP_POSES = [Rigid2D(3.0, 4.0, 0.7), Rigid2D(20.0, 12.5, 2.5), Rigid2D(18.0, 4.5, -2.2)]
 LASER = ['fov_deg:=360.0', 'num_beams:=720']
 
 

@@ -13,7 +13,7 @@ from global_loc.processes import Process, TopicRecorder, isolated_env, reliable,
 
 TEST_DIR = os.path.dirname(os.path.abspath(__file__))
 
-TRUTH = (3.0, 4.0, 0.7)     # a place the default (thesis) matcher gets right; see test_matchers
+TRUTH = (3.0, 4.0, 0.7)     # a place every matcher but features gets right; see test_matchers
 
 
 def parse_pose(stdout: str):
@@ -93,8 +93,8 @@ def test_unknown_method_aborts_and_the_server_keeps_serving(system):
 def test_cancel_mid_search_ends_the_goal_quickly_and_the_server_keeps_serving(system):
     env, server, _ = system
     t0 = time.monotonic()
-    # Δα = 0.5 deg: 720 rotations, far longer than the 1.5 s before the cancel.
-    out = run_client(env, '--angle-step', '0.5', '--cancel-after', '1.5')
+    # The thesis matcher at Δα = 0.5 deg: 720 rotations, far longer than the 1.5 s before the cancel.
+    out = run_client(env, '--method', 'template_ccoeff', '--angle-step', '0.5', '--cancel-after', '1.5')
     elapsed = time.monotonic() - t0
     assert 'canceled: canceled' in out.stdout, out.stdout + out.stderr
     assert out.returncode == 1
@@ -107,7 +107,8 @@ def test_goal_while_busy_is_aborted_with_a_reason(system):
     import subprocess
     from global_loc.processes import ros2
     started = server.output().count('matching a scan')
-    slow = subprocess.Popen([ros2(), 'run', 'global_loc', 'test_global_loc', '--angle-step', '0.5',
+    slow = subprocess.Popen([ros2(), 'run', 'global_loc', 'test_global_loc', '--method', 'template_ccoeff',
+                             '--angle-step', '0.5',
                              '--cancel-after', '8'], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         deadline = time.monotonic() + 20
@@ -192,3 +193,29 @@ def test_map_from_occupancy_grid_topic(tmp_path):
         assert server.stop() == 0
         node.destroy_node()
         context.try_shutdown()
+
+
+def test_ambiguous_place_publishes_nothing_unless_asked(tmp_path):
+    """A four-fold symmetric room: the result says ambiguous, lists the hypotheses, and
+    /initialpose stays silent unless the goal asks to publish the best anyway."""
+    from test_bnb import symmetric_room
+
+    from global_loc.map_io import save_map_yaml
+    save_map_yaml(symmetric_room(), tmp_path / 'square.yaml')
+    env = isolated_env()
+    listener = initialpose_listener(env)
+    server = start_server(env, tmp_path / 'server.log', f'map_yaml:={tmp_path / "square.yaml"}')
+    publisher = start_scan_publisher(env, tmp_path / 'pub.log', str(tmp_path / 'square.yaml'), (2.0, 1.4, 0.4))
+    try:
+        out = run_client(env, '--timeout', '10')
+        assert out.returncode == 1, out.stdout
+        assert 'aborted: ambiguous' in out.stdout and 'hypothesis 4:' in out.stdout
+        time.sleep(1.0)
+        assert listener.messages['/initialpose'] == []
+        out = run_client(env, '--timeout', '10', '--publish-if-ambiguous')
+        assert out.returncode == 1 and 'aborted: ambiguous' in out.stdout
+        assert len(listener.wait_for('/initialpose', 1)) == 1
+    finally:
+        publisher.stop()
+        listener.close()
+        assert server.stop() == 0

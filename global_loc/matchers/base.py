@@ -12,6 +12,8 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Callable, Optional
 
+import numpy as np
+
 from ..map_io import OccupancyMap
 from ..scan import ScanPoints
 from ..transform import Rigid2D
@@ -31,6 +33,14 @@ class MethodError(ValueError):
 class Candidate:
     laser_pose: Rigid2D    # laser frame in the map frame
     score: float           # higher is better; scale depends on the matcher
+    covariance: Optional[np.ndarray] = None   # 3x3 (x, y, yaw) of laser_pose, when the matcher knows it
+
+
+@dataclass
+class Verdict:
+    success: bool
+    confidence: float      # 0..1
+    message: str
 
 
 @dataclass
@@ -48,6 +58,18 @@ class Matcher(ABC):
 
     def __init__(self, occupancy_map: OccupancyMap):
         self.map = occupancy_map
+
+    def judge(self, scores: list[float]) -> Verdict:
+        """Success and confidence from the distinct hypotheses' scores, best first. The
+        thesis matchers: success = best score at least min_score; confidence = how far
+        the best stands above the next, relative to it."""
+        if not scores:
+            return Verdict(False, 0.0, f'{self.name} found no match')
+        best = scores[0]
+        conf = 1.0 if len(scores) == 1 else float(np.clip((best - scores[1]) / best, 0.0, 1.0)) if best > 0 else 0.0
+        if best >= self.min_score:
+            return Verdict(True, conf, 'localized')
+        return Verdict(False, conf, f'best score {best:.3f} is below {self.name}\'s minimum {self.min_score}')
 
     @abstractmethod
     def match(self, points: ScanPoints, options: MatchOptions,

@@ -29,7 +29,7 @@ from scipy.optimize import minimize
 
 from ..map_io import OccupancyMap
 from ..transform import Rigid2D
-from .base import Candidate, Matcher
+from .base import Candidate, Matcher, Verdict
 
 
 @dataclass
@@ -43,6 +43,11 @@ class BranchAndBoundOptions:
     hypotheses: int = 8            # distinct poses refined and returned
     distinct_cells: float = 16.0   # poses closer than this (and < distinct_angle) are one peak
     distinct_angle: float = math.radians(20.0)
+    # Confidence = (margin of the best over the next distinct peak, relative to the best,
+    # over 1 - keep_ratio, the largest margin the search can see) x (how much of the
+    # scan the map explains: (score - 0.3) / 0.3, clipped). success: confidence at least
+    # min_confidence.
+    min_confidence: float = 0.5
 
 
 MARGINS = (0, 1, 2, 3, 5, 9, 17, 33)   # widenings (cells) for which grids are kept
@@ -101,6 +106,26 @@ class BranchAndBoundMatcher(Matcher):
         super().__init__(occupancy_map)
         self.options = options or BranchAndBoundOptions()
         self.stack = PrecomputationGridStack(occupancy_map, self.options)
+
+    def judge(self, scores):
+        """See BranchAndBoundOptions: a near-tie with another place is "ambiguous", a
+        scan the map explains poorly is a "poor match"; neither is a success."""
+        opt = self.options
+        if not scores:
+            return Verdict(False, 0.0, 'bnb found no pose on free space')
+        best = scores[0]
+        # No other peak found means none scored above keep_ratio x best.
+        second = scores[1] if len(scores) > 1 else opt.keep_ratio * best
+        margin = (best - second) / best if best > 0 else 0.0
+        explained = float(np.clip((best - 0.3) / 0.3, 0.0, 1.0))
+        conf = float(np.clip(margin / (1.0 - opt.keep_ratio), 0.0, 1.0)) * explained
+        if conf >= opt.min_confidence:
+            return Verdict(True, conf, 'localized')
+        if explained < 1.0 and explained * 1.0 < opt.min_confidence:
+            return Verdict(False, conf, f'poor match: the map explains about {100 * best:.0f}% of the scan')
+        close = sum(s >= best * (1.0 - 2 * margin) for s in scores[1:]) if margin > 0 else len(scores) - 1
+        return Verdict(False, conf, f'ambiguous: {max(close, 1)} other place(s) match within '
+                                    f'{100 * margin:.1f}% of the best; see the hypotheses')
 
     # ---- scan preparation --------------------------------------------------------
     def prepare(self, points: np.ndarray) -> np.ndarray:
@@ -248,14 +273,40 @@ class BranchAndBoundMatcher(Matcher):
                 kept.append(i)
                 if len(kept) == opt.hypotheses:
                     break
-        out = []
-        for i in kept:
-            u, v, yaw, score = self.refine(float(tu[i]), float(tv[i]), float(ta[i] * d0), pts)
-            out.append(Candidate(self.laser_pose(u, v, yaw), score))
+        refined = sorted((self.refine(float(tu[i]), float(tv[i]), float(ta[i] * d0), pts) for i in kept),
+                         key=lambda r: -r[3])
+        out = [Candidate(self.laser_pose(u, v, yaw), score) for u, v, yaw, score in refined]
+        if out:
+            out[0].covariance = self.landscape_covariance(*refined[0][:3], pts)
         if progress:
             progress(1.0, out[0].score if out else 0.0)
-        out.sort(key=lambda c: -c.score)
         return out
+
+    def landscape_covariance(self, u, v, yaw, pts, half: int = 3) -> np.ndarray:
+        """(x, y, yaw) covariance in the map frame from the score landscape around a
+        peak: scores on a (2 half + 1)^3 grid of cell and one-cell-at-max-range steps,
+        weighted as likelihoods (s / s_max)^N of N independent points, plus the
+        search's own resolution (a uniform cell and angle step: step^2 / 12)."""
+        res = self.map.resolution
+        d_yaw = res / max(float(np.hypot(pts[:, 0], pts[:, 1]).max()), res)
+        steps = np.arange(-half, half + 1, dtype=float)
+        du, dv, da = (g.ravel() for g in np.meshgrid(steps, steps, steps * d_yaw, indexing='ij'))
+        c, s = np.cos(yaw + da)[:, None], np.sin(yaw + da)[:, None]
+        x = u + du[:, None] + (c * pts[:, 0] - s * pts[:, 1]) / res
+        y = v + dv[:, None] - (s * pts[:, 0] + c * pts[:, 1]) / res
+        scores = map_coordinates(self.stack.field, [y.ravel(), x.ravel()], order=1, mode='constant',
+                                 cval=0.0).reshape(len(du), -1).mean(axis=1)
+        scores = np.maximum(scores, 1e-9)
+        w = np.exp(len(pts) * (np.log(scores) - np.log(scores.max())))
+        w /= w.sum()
+        offsets = np.stack([du * res, -dv * res, da], axis=1)      # grid frame: v points down
+        mean = w @ offsets
+        cov = (offsets - mean).T @ ((offsets - mean) * w[:, None])
+        cov += np.diag([res ** 2 / 12, res ** 2 / 12, d_yaw ** 2 / 12])
+        rot = np.eye(3)
+        cy, sy = math.cos(self.map.origin.yaw), math.sin(self.map.origin.yaw)
+        rot[:2, :2] = [[cy, -sy], [sy, cy]]
+        return rot @ cov @ rot.T
 
     def mean_field(self, u, v, yaw, pts) -> float:
         c, s = math.cos(yaw), math.sin(yaw)
