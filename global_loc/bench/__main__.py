@@ -23,7 +23,7 @@ from tqdm import tqdm
 from ..localizer import Localizer, pose_error
 from ..paths import PACKAGE_ROOT
 from .report import write_report
-from .suites import ANGLE_STEP_METHODS, THESIS_METHODS, carmen_trials, cut_trials, load_maps, sim_trials
+from .suites import ANGLE_STEP_METHODS, METHODS, carmen_trials, cut_trials, load_maps, sim_trials
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 _MAPS = {}        # map name -> OccupancyMap, set before the workers fork
@@ -50,7 +50,8 @@ def run_job(job):
                 'time_s': float('nan')}
     row.update(time_s=res.time_s, success=res.success, confidence=res.confidence,
                score=res.score if math.isfinite(res.score) else None, found=res.pose is not None,
-               top4_ok=any(_ok(pose_error(h.pose, trial.truth), 0.2, 5) for h in res.hypotheses[:4]))
+               top4_ok=any(_ok(pose_error(h.pose, trial.truth), 0.2, 5) for h in res.hypotheses[:4]),
+               hyp_scores=[round(h.score, 4) for h in res.hypotheses[:4]], message=res.message.split(':')[0])
     if res.pose is None:
         row.update(ok=False, ok_loose=False)
     else:
@@ -96,13 +97,13 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog='python -m global_loc.bench', description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='few poses and maps: a few minutes')
     parser.add_argument('--suites', default='cut,sim,carmen', help='comma-separated: cut, sim, carmen')
-    parser.add_argument('--methods', default=','.join(THESIS_METHODS))
+    parser.add_argument('--methods', default=','.join(METHODS))
     parser.add_argument('--jobs', type=int, default=os.cpu_count() or 1, help='worker processes')
     parser.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'), help='shared/data folder')
     parser.add_argument('--out', default=None, help='output folder')
     parser.add_argument('--seed', type=int, default=2015)
     parser.add_argument('--poses', type=int, default=0, help='poses per map (default: 50, quick 6; suite 1: a fifth)')
-    parser.add_argument('--scans-per-log', type=int, default=0, help='real scans per log (default: 150, quick 12)')
+    parser.add_argument('--scans-per-log', type=int, default=0, help='real scans per log (default: 100, quick 12)')
     args = parser.parse_args(argv)
     out = args.out or os.path.join(REPO, 'benchmarks', 'results', 'quick' if args.quick else '')
     os.makedirs(out, exist_ok=True)
@@ -123,7 +124,7 @@ def main(argv=None) -> int:
     if 'carmen' in suites:
         print('building held-out maps from the CARMEN logs ...', file=sys.stderr)
         carmen, carmen_maps, notes['carmen_filters'] = carmen_trials(
-            args.shared, args.scans_per_log or (12 if args.quick else 150), args.seed)
+            args.shared, args.scans_per_log or (12 if args.quick else 100), args.seed)
         trials += carmen
         maps.update(carmen_maps)
     _MAPS.update(maps)

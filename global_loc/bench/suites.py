@@ -17,6 +17,7 @@ from ..sim.simulator import BASE_T_LASER, LaserConfig, Simulator
 from ..transform import Rigid2D
 
 THESIS_METHODS = ['template_ccoeff', 'template_sqdiff', 'features_orb', 'features_sift']
+METHODS = ['bnb'] + THESIS_METHODS
 # Δα only changes the template matchers; the others run once per scan.
 ANGLE_STEP_METHODS = {'template_ccoeff', 'template_sqdiff'}
 

@@ -36,10 +36,12 @@ from .base import Candidate, Matcher, Verdict
 class BranchAndBoundOptions:
     sigma_cells: float = 1.5       # likelihood field width, cells
     levels: int = 7                # blocks of 1 .. 64 cells
-    max_points: int = 360          # scan points kept after the one-cell voxel filter
-    keep_ratio: float = 0.95       # nodes bounded above keep_ratio x best score are explored:
+    max_points: int = 240          # scan points kept after the one-cell voxel filter
+    max_range: float = 30.0        # m; farther returns are left out (the angle step shrinks
+                                   # with the largest range, and far returns are the least sure)
+    keep_ratio: float = 0.9        # nodes bounded above keep_ratio x best score are explored:
                                    # every pose scoring that high is found (the hypotheses)
-    max_nodes: int = 40000         # expansions; past it the search stops (and says it was not exhaustive)
+    max_nodes: int = 60000         # expansions; past it the search stops (and says it was not exhaustive)
     hypotheses: int = 8            # distinct poses refined and returned
     distinct_cells: float = 16.0   # poses closer than this (and < distinct_angle) are one peak
     distinct_angle: float = math.radians(20.0)
@@ -105,6 +107,7 @@ class BranchAndBoundMatcher(Matcher):
     def __init__(self, occupancy_map: OccupancyMap, options: BranchAndBoundOptions | None = None):
         super().__init__(occupancy_map)
         self.options = options or BranchAndBoundOptions()
+        self.last_search: dict = {}
         self.stack = PrecomputationGridStack(occupancy_map, self.options)
 
     def judge(self, scores):
@@ -113,6 +116,10 @@ class BranchAndBoundMatcher(Matcher):
         opt = self.options
         if not scores:
             return Verdict(False, 0.0, 'bnb found no pose on free space')
+        if not self.last_search.get('exact', True):
+            # The node budget ran out: a better place may be unexplored, so no margin holds.
+            return Verdict(False, 0.0, f'search incomplete: stopped after {opt.max_nodes} node expansions; '
+                                       f'best of what was explored, see the hypotheses')
         best = scores[0]
         # No other peak found means none scored above keep_ratio x best.
         second = scores[1] if len(scores) > 1 else opt.keep_ratio * best
@@ -131,6 +138,7 @@ class BranchAndBoundMatcher(Matcher):
     def prepare(self, points: np.ndarray) -> np.ndarray:
         """One point per cell (voxel filter), at most max_points of them, evenly chosen."""
         res = self.map.resolution
+        points = points[np.hypot(points[:, 0], points[:, 1]) <= self.options.max_range]
         keys = np.floor(points / res).astype(np.int64)
         _, first = np.unique(keys, axis=0, return_index=True)
         pts = points[np.sort(first)]
@@ -212,8 +220,8 @@ class BranchAndBoundMatcher(Matcher):
                             'best_leaf': float(ls.max()) if len(ls) else 0.0}
         return self.refine_peaks(lu, lv, la, ls, pts, d0, progress)
 
-    def best_first(self, tu, tv, ta, b, top, pts, d0, n_angles, progress, batch: int = 256):
-        """Branch and bound, best bound first, `batch` nodes expanded at a time. Every
+    def best_first(self, tu, tv, ta, b, top, pts, d0, n_angles, progress, batch: int = 512):
+        """Branch and bound, depth first, `batch` nodes expanded at a time. Every
         node whose bound reaches keep_ratio x the best leaf so far is expanded; returns
         the leaves scoring that high (u, v, angle index, score) and whether the search
         was exhaustive (False when max_nodes stopped it)."""
@@ -229,7 +237,10 @@ class BranchAndBoundMatcher(Matcher):
                 break
             if expanded >= opt.max_nodes:
                 return self._keep(found, threshold), False
-            pick = np.argpartition(-b, batch - 1)[:batch] if len(b) > batch else np.arange(len(b))
+            # Deepest live nodes first, best bound first among them (Cartographer's depth-first
+            # order, in batches): leaves come early, and with them a pruning threshold.
+            deepest = np.flatnonzero(level == level.min())
+            pick = deepest[np.argpartition(-b[deepest], batch - 1)[:batch]] if len(deepest) > batch else deepest
             rest = np.ones(len(b), bool)
             rest[pick] = False
             new = []
