@@ -14,7 +14,8 @@ from typing import Optional
 import numpy as np
 
 from .map_io import OccupancyMap
-from .matchers import Candidate, MatchOptions, make_matcher, resolve_method
+from .matchers import MatchOptions, make_matcher, resolve_method
+from .matchers.base import distinct
 from .matchers.base import ProgressFn
 from .scan import Scan, ScanPoints, scan_to_points
 from .transform import Rigid2D, covariance_of_composition, normalize_angle
@@ -53,19 +54,6 @@ class LocalizationResult:
     hypotheses: list = field(default_factory=list)
     time_s: float = 0.0
     dropped: dict = field(default_factory=dict)
-
-
-def distinct(candidates: list[Candidate], k: int, min_distance: float, min_angle: float) -> list[Candidate]:
-    """Non-maximum suppression in (x, y, yaw): the best k candidates no two of which are
-    within min_distance metres *and* min_angle radians of each other."""
-    kept: list[Candidate] = []
-    for c in sorted(candidates, key=lambda c: -c.score):
-        if all(c.laser_pose.distance_to(o.laser_pose)[0] >= min_distance or
-               c.laser_pose.distance_to(o.laser_pose)[1] >= min_angle for o in kept):
-            kept.append(c)
-            if len(kept) == k:
-                break
-    return kept
 
 
 class Localizer:

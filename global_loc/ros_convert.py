@@ -19,6 +19,16 @@ def scan_from_msg(msg: LaserScan) -> Scan:
                 msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
 
 
+def scan_to_msg(scan: Scan, frame_id: str, stamp, scan_time: float = 0.0) -> LaserScan:
+    msg = LaserScan(angle_min=float(scan.angle_min), angle_increment=float(scan.angle_increment),
+                    angle_max=float(scan.angle_min + scan.angle_increment * (len(scan.ranges) - 1)),
+                    scan_time=float(scan_time), range_min=float(scan.range_min), range_max=float(scan.range_max),
+                    ranges=[float(r) for r in scan.ranges])
+    msg.header.frame_id = frame_id
+    msg.header.stamp = stamp
+    return msg
+
+
 def yaw_to_quaternion(yaw: float) -> Quaternion:
     return Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
 

@@ -11,6 +11,7 @@ from sensor_msgs.msg import LaserScan
 
 from global_loc.map_io import load_map_yaml
 from global_loc.raycast import simulate_scan
+from global_loc.ros_convert import scan_to_msg
 from global_loc.transform import Rigid2D
 
 
@@ -25,12 +26,7 @@ def main():
 
     def tick():
         scan = simulate_scan(occupancy_map, Rigid2D(x, y, yaw), 270.0, 541, 20.0, noise_std=0.01, dropout=0.02, rng=rng)
-        msg = LaserScan(angle_min=scan.angle_min, angle_max=scan.angle_min + scan.angle_increment * (len(scan.ranges) - 1),
-                        angle_increment=scan.angle_increment, range_min=scan.range_min, range_max=scan.range_max,
-                        ranges=[float(r) for r in scan.ranges])
-        msg.header.frame_id = 'laser'
-        msg.header.stamp = node.get_clock().now().to_msg()
-        pub.publish(msg)
+        pub.publish(scan_to_msg(scan, 'laser', node.get_clock().now().to_msg()))
 
     node.create_timer(1.0 / rate, tick)
     try:

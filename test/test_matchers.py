@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from global_loc.localizer import Localizer, LocalizerConfig, distinct, pose_error
+from global_loc.localizer import Localizer, LocalizerConfig, pose_error
+from global_loc.matchers.base import distinct
 from global_loc.matchers import Candidate, MatchOptions, MethodError, method_names, resolve_method
 from global_loc.matchers.features import make_detector, surf_available
 from global_loc.raycast import points_cut_from_map, simulate_scan

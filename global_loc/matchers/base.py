@@ -36,6 +36,19 @@ class Candidate:
     covariance: Optional[np.ndarray] = None   # 3x3 (x, y, yaw) of laser_pose, when the matcher knows it
 
 
+def distinct(candidates: list[Candidate], k: int, min_distance: float, min_angle: float) -> list[Candidate]:
+    """Non-maximum suppression in (x, y, yaw): the best k candidates no two of which are
+    within min_distance metres *and* min_angle radians of each other."""
+    kept: list[Candidate] = []
+    for c in sorted(candidates, key=lambda c: -c.score):
+        if all(c.laser_pose.distance_to(o.laser_pose)[0] >= min_distance or
+               c.laser_pose.distance_to(o.laser_pose)[1] >= min_angle for o in kept):
+            kept.append(c)
+            if len(kept) == k:
+                break
+    return kept
+
+
 @dataclass
 class Verdict:
     success: bool

@@ -29,7 +29,7 @@ from scipy.optimize import minimize
 
 from ..map_io import OccupancyMap
 from ..transform import Rigid2D
-from .base import Candidate, Matcher, Verdict
+from .base import Candidate, Matcher, Verdict, distinct
 
 
 @dataclass
@@ -276,16 +276,16 @@ class BranchAndBoundMatcher(Matcher):
     # ---- peaks and refinement ----------------------------------------------------
     def refine_peaks(self, tu, tv, ta, scores, pts, d0, progress):
         opt = self.options
-        order = np.argsort(-scores)
-        kept = []
-        for i in order:
-            if all(math.hypot(tu[i] - tu[j], tv[i] - tv[j]) >= opt.distinct_cells or
-                   abs(math.remainder((ta[i] - ta[j]) * d0, 2 * math.pi)) >= opt.distinct_angle for j in kept):
-                kept.append(i)
-                if len(kept) == opt.hypotheses:
-                    break
-        refined = sorted((self.refine(float(tu[i]), float(tv[i]), float(ta[i] * d0), pts) for i in kept),
-                         key=lambda r: -r[3])
+        leaves = [Candidate(self.laser_pose(float(u), float(v), float(a * d0)), float(sc))
+                  for u, v, a, sc in zip(tu, tv, ta, scores)]
+        peaks = distinct(leaves, opt.hypotheses, opt.distinct_cells * self.map.resolution, opt.distinct_angle)
+        grid_T_map = self.map.origin.inverse()
+        starts = []
+        for c in peaks:   # back to (u, v, grid-frame yaw) for the refinement
+            g = grid_T_map * c.laser_pose
+            u, v = self.map.grid_to_pixel([[g.x, g.y]])[0]
+            starts.append((float(u), float(v), g.yaw))
+        refined = sorted((self.refine(u, v, yaw, pts) for u, v, yaw in starts), key=lambda r: -r[3])
         out = [Candidate(self.laser_pose(u, v, yaw), score) for u, v, yaw, score in refined]
         if out:
             out[0].covariance = self.landscape_covariance(*refined[0][:3], pts)

@@ -19,7 +19,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 
 from ..map_io import MapError, load_map_yaml
-from ..ros_convert import pose_from_msg, pose_to_msg
+from ..ros_convert import pose_from_msg, pose_to_msg, scan_to_msg
 from ..transform import Rigid2D
 from .simulator import LaserConfig, Simulator
 
@@ -78,12 +78,7 @@ class SimNode(Node):
             self.sim.drive(v, w, self.period)
         scan = self.sim.scan()
         stamp = self.get_clock().now().to_msg()
-        msg = LaserScan(angle_min=scan.angle_min, angle_increment=scan.angle_increment,
-                        angle_max=scan.angle_min + scan.angle_increment * (len(scan.ranges) - 1),
-                        scan_time=self.period, range_min=scan.range_min, range_max=scan.range_max,
-                        ranges=[float(r) for r in scan.ranges])
-        msg.header.frame_id = 'laser'
-        msg.header.stamp = stamp
+        msg = scan_to_msg(scan, 'laser', stamp, self.period)
         truth = PoseStamped()
         truth.header.frame_id = 'map'
         truth.header.stamp = stamp
