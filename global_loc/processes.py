@@ -106,6 +106,17 @@ class TopicRecorder:
             time.sleep(0.05)
         return self.messages[topic]
 
+    def wait_for_publisher(self, topic: str, timeout: float = 10.0) -> bool:
+        """Until some node publishes `topic` as seen by discovery (a volatile topic such as
+        /initialpose delivers nothing to a subscriber that has not matched yet)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.node.count_publishers(topic) > 0:
+                time.sleep(0.2)   # discovery seen; give the reader/writer match a moment
+                return True
+            time.sleep(0.05)
+        return False
+
     def close(self) -> None:
         self.executor.shutdown()
         self.node.destroy_node()

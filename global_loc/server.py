@@ -287,6 +287,11 @@ def main(args=None):
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if rclpy.ok():
+            raise
+        # SIGINT/SIGTERM shut the context down under a running callback or the constructor
+        # (its publish then fails): that is the requested stop, not a crash.
     finally:
         if node is not None:
             node.destroy_node()

@@ -51,6 +51,7 @@ def main():
                                    '/scan': (LaserScan, 5)})
     code = 1
     try:
+        recorder.wait_for_publisher('/initialpose')
         print('asking the server (ros2 run global_loc test_global_loc) ...', flush=True)
         import subprocess
         from global_loc.processes import ros2

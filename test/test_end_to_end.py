@@ -56,6 +56,7 @@ def test_kidnapped_robot_is_found_by_server_and_client(tmp_path, clutter):
     set_pose = recorder.node.create_publisher(PoseStamped, '/sim/set_pose', reliable())
     try:
         recorder.wait_for('/sim/true_pose', 1)
+        assert recorder.wait_for_publisher('/initialpose')
         localize_and_compare(env, recorder)
         if not clutter:
             for pose in KIDNAP_POSES[1:]:

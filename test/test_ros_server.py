@@ -46,6 +46,7 @@ def system(tmp_path_factory):
     listener = initialpose_listener(env)
     server = start_server(env, logs / 'server.log', 'scan_timeout_s:=5.0')
     publisher = start_scan_publisher(env, logs / 'publisher.log', OFFICE_YAML, TRUTH)
+    assert listener.wait_for_publisher('/initialpose')
     yield env, server, listener
     publisher.stop()
     listener.close()
@@ -206,6 +207,7 @@ def test_ambiguous_place_publishes_nothing_unless_asked(tmp_path):
     listener = initialpose_listener(env)
     server = start_server(env, tmp_path / 'server.log', f'map_yaml:={tmp_path / "square.yaml"}')
     publisher = start_scan_publisher(env, tmp_path / 'pub.log', str(tmp_path / 'square.yaml'), (2.0, 1.4, 0.4))
+    assert listener.wait_for_publisher('/initialpose')
     try:
         out = run_client(env, '--timeout', '10')
         assert out.returncode == 1, out.stdout
