@@ -80,6 +80,9 @@ def write_report(rows, meta, out, maps, trials) -> None:
            f'"time / baseline": median time over the thesis baseline ({BASELINE}, Δα = 5°) on the same trials '
            'of the same run (< 1 is faster).', '',
            'Maps: ' + ', '.join(f'{n} ({v})' for n, v in meta['maps'].items()) + '.', '']
+    reading = os.path.join(os.path.dirname(os.path.dirname(out.rstrip('/'))), 'READING.md')
+    if not meta['quick'] and os.path.exists(reading):   # the hand-written reading of the full run
+        md += [open(reading).read(), '']
 
     if 'sim' in by_suite:
         sim = by_suite['sim']
