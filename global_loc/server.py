@@ -13,6 +13,7 @@ scan, internal error — aborts that goal with a message; the node keeps serving
 from __future__ import annotations
 
 import math
+import sys
 import threading
 import time
 import traceback
@@ -24,7 +25,7 @@ from nav_msgs.msg import OccupancyGrid
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
@@ -32,6 +33,7 @@ from sensor_msgs.msg import LaserScan
 from .localizer import Localizer, LocalizerConfig
 from .map_io import MapError, load_map_yaml
 from .matchers import Cancelled, MethodError, method_names, resolve_method
+from .node_main import run_node
 from .ros_convert import map_from_msg, pose_to_msg, pose_with_covariance, scan_from_msg
 from .scan import ScanError
 from .transform import Rigid2D
@@ -278,25 +280,8 @@ class GlobalLocServer(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = GlobalLocServer()
-        executor = MultiThreadedExecutor(num_threads=4)   # a running goal never starves scans or cancels
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if rclpy.ok():
-            raise
-        # SIGINT/SIGTERM shut the context down under a running callback or the constructor
-        # (its publish then fails): that is the requested stop, not a crash.
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    # Four threads: a running goal never starves the scan, cancel and goal callbacks.
+    sys.exit(run_node(GlobalLocServer, lambda: MultiThreadedExecutor(num_threads=4), args=args))
 
 
 if __name__ == '__main__':

@@ -8,17 +8,18 @@ geometry_msgs/PoseStamped on /sim/true_pose. Drives the wheels from /cmd_vel
 from __future__ import annotations
 
 import math
+import sys
 import time
 
 import rclpy
 from geometry_msgs.msg import PoseStamped, Twist
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 
 from ..map_io import MapError, load_map_yaml
+from ..node_main import run_node
 from ..ros_convert import pose_from_msg, pose_to_msg, scan_to_msg
 from ..transform import Rigid2D
 from .simulator import LaserConfig, Simulator
@@ -60,6 +61,10 @@ class SimNode(Node):
                                f'x={start.x:.2f} y={start.y:.2f} yaw={math.degrees(start.yaw):.1f} deg, '
                                f'{clutter} clutter objects, {laser.num_beams} beams over {laser.fov_deg} deg')
 
+    def close(self) -> None:
+        """Disconnect pybullet (run_node calls it on shutdown)."""
+        self.sim.close()
+
     def on_cmd_vel(self, msg: Twist) -> None:
         """Latest velocity command; it lapses after 0.5 s without a new one."""
         self.cmd = (msg.linear.x, msg.angular.z)
@@ -88,26 +93,7 @@ class SimNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = SimNode()
-        rclpy.spin(node)
-    except MapError as e:
-        print(f'global_loc sim: {e}')
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if rclpy.ok():
-            raise
-        # SIGINT/SIGTERM shut the context down under a running callback or the constructor
-        # (its publish then fails): that is the requested stop, not a crash.
-    finally:
-        if node is not None:
-            node.sim.close()
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    sys.exit(run_node(SimNode, startup_errors=(MapError,), args=args))
 
 
 if __name__ == '__main__':

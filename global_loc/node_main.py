@@ -1,0 +1,41 @@
+"""The one way the package's nodes run: init, build, spin until SIGINT/SIGTERM, clean up."""
+from __future__ import annotations
+
+import sys
+from typing import Callable, Optional
+
+import rclpy
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+
+
+def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]] = None,
+             startup_errors: tuple = (), args=None) -> int:
+    """Spin the node `make_node()` builds; return the exit code. An exception listed in
+    `startup_errors` (e.g. a map that cannot be loaded) is printed as one line and exits 1."""
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = make_node()
+        executor = make_executor() if make_executor else SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except startup_errors as e:
+        print(f'{getattr(node, "get_name", lambda: "global_loc")()}: {e}', file=sys.stderr)
+        code = 1
+    except Exception:
+        if rclpy.ok():
+            raise
+        # SIGINT/SIGTERM shut the context down under a running callback or the constructor
+        # (its publish then fails): that is the requested stop, not a crash.
+    finally:
+        if node is not None:
+            close = getattr(node, 'close', None)
+            if close:
+                close()
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return code
