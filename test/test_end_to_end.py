@@ -66,3 +66,13 @@ def test_kidnapped_robot_is_found_by_server_and_client(tmp_path, clutter):
         recorder.close()
         assert server.stop() == 0
         assert sim.stop() == 0
+
+
+def test_simulator_with_a_missing_map_exits_with_the_reason(tmp_path):
+    import subprocess
+
+    from global_loc.processes import ros2
+    out = subprocess.run([ros2(), 'run', 'global_loc', 'sim', '--ros-args', '-p', f'map_yaml:={tmp_path}/none.yaml'],
+                         env=isolated_env(), capture_output=True, text=True, timeout=60)
+    assert out.returncode == 1
+    assert 'none.yaml: map YAML not found' in out.stderr
