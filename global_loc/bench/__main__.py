@@ -113,6 +113,7 @@ def main(argv=None) -> int:
         print(f'note: {args.shared} not found: real maps and logs are skipped', file=sys.stderr)
 
     t0 = time.time()
+    machine = machine_info()   # before this run writes anything: the commit it runs from
     poses = args.poses or (6 if args.quick else 50)
     maps = load_maps(args.shared, args.quick)
     trials, notes = [], {}
@@ -139,7 +140,7 @@ def main(argv=None) -> int:
     with open(os.path.join(out, 'rows.jsonl'), 'w') as f:
         for row in rows:
             f.write(json.dumps(row) + '\n')
-    meta = {'machine': machine_info(), 'command': 'python -m global_loc.bench ' + ' '.join(argv or sys.argv[1:]),
+    meta = {'machine': machine, 'command': 'python -m global_loc.bench ' + ' '.join(argv or sys.argv[1:]),
             'jobs': args.jobs, 'wall_time_s': round(time.time() - t0, 1), 'quick': args.quick,
             'maps': {n: f'{m.width} x {m.height} cells at {m.resolution} m' for n, m in maps.items() if '/' not in n},
             **notes}
