@@ -18,7 +18,7 @@ from .matchers import MatchOptions, make_matcher, resolve_method
 from .matchers.base import distinct
 from .matchers.base import ProgressFn
 from .scan import Scan, ScanPoints, scan_to_points
-from .transform import Rigid2D, covariance_of_composition, normalize_angle
+from .transform import Rigid2D, covariance_of_composition
 
 
 @dataclass
@@ -110,5 +110,5 @@ class Localizer:
 
 def pose_error(estimate: Rigid2D, truth: Rigid2D) -> tuple[float, float]:
     """(metres, degrees) between two poses."""
-    d, a = estimate.distance_to(truth)
-    return d, math.degrees(abs(normalize_angle(a)))
+    d, a = estimate.distance_to(truth)   # a: already the absolute wrapped difference
+    return d, math.degrees(a)

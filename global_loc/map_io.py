@@ -49,7 +49,7 @@ class OccupancyMap:
     @property
     def occupied(self) -> np.ndarray:
         """Boolean mask of occupied cells."""
-        return self.occupancy >= 65 if self.occupancy.dtype != bool else self.occupancy
+        return self.occupancy >= 65
 
     @property
     def free(self) -> np.ndarray:

@@ -273,8 +273,7 @@ class GlobalLocServer(Node):
         elif how == 'cancel':
             goal_handle.canceled()
         else:
-            if how == 'abort' and not result.success:
-                self.get_logger().warn(f'goal aborted: {message}')
+            self.get_logger().warn(f'goal aborted: {message}')
             goal_handle.abort()
         return result
 

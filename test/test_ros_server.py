@@ -3,7 +3,6 @@ import math
 import os
 import re
 import sys
-import threading
 import time
 
 import pytest

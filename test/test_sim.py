@@ -4,7 +4,6 @@ import math
 import numpy as np
 import pytest
 
-from global_loc.localizer import pose_error
 from global_loc.raycast import simulate_scan
 from global_loc.sim.simulator import BASE_T_LASER, LaserConfig, Simulator
 from global_loc.sim.world import merge_cells_into_boxes

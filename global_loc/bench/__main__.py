@@ -21,7 +21,6 @@ import numpy as np
 from tqdm import tqdm
 
 from ..localizer import Localizer, pose_error
-from ..paths import PACKAGE_ROOT
 from .report import write_report
 from .suites import ANGLE_STEP_METHODS, METHODS, carmen_trials, cut_trials, load_maps, sim_trials
 

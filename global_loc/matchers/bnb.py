@@ -94,7 +94,9 @@ class PrecomputationGridStack:
 
     def margin_groups(self, level: int, ranges: np.ndarray, r_max: float) -> list[tuple[int, np.ndarray]]:
         """(widening, indices of the points that need it) for one level."""
-        need = np.array([self.margin(level, r / r_max) for r in ranges])
+        # margin() for every point at once (this runs in every bound evaluation)
+        need = np.zeros(len(ranges), int) if level == 0 else \
+            np.ceil((2 ** level - 1) / 2.0 * (ranges / r_max) + 1e-3).astype(int) + 1
         available = np.array([m for m in MARGINS if (level, m) in self.grids])
         use = available[np.searchsorted(available, need)]
         return [(int(m), np.flatnonzero(use == m)) for m in np.unique(use)]

@@ -11,7 +11,6 @@ import math
 import sys
 import time
 
-import rclpy
 from geometry_msgs.msg import PoseStamped, Twist
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
