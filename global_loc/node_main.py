@@ -13,7 +13,7 @@ def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]
     """Spin the node `make_node()` builds; return the exit code. An exception listed in
     `startup_errors` (e.g. a map that cannot be loaded) is printed as one line and exits 1."""
     rclpy.init(args=args)
-    node = None
+    node = executor = None
     code = 0
     try:
         node = make_node()
@@ -31,6 +31,8 @@ def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]
         # SIGINT/SIGTERM shut the context down under a running callback or the constructor
         # (its publish then fails): that is the requested stop, not a crash.
     finally:
+        if executor is not None:
+            executor.shutdown(timeout_sec=5.0)   # join the executor's worker threads first
         if node is not None:
             close = getattr(node, 'close', None)
             if close:
