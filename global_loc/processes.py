@@ -97,8 +97,13 @@ class TopicRecorder:
             self.node.create_subscription(msg_type, name, self.messages[name].append, qos)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.stopping = threading.Event()
+        self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()
+
+    def _spin(self) -> None:
+        while not self.stopping.is_set():
+            self.executor.spin_once(timeout_sec=0.05)
 
     def wait_for(self, topic: str, count: int, timeout: float = 10.0) -> list:
         deadline = time.monotonic() + timeout
@@ -118,6 +123,11 @@ class TopicRecorder:
         return False
 
     def close(self) -> None:
+        # Stop and join the spinning thread before tearing the executor down: shutting an
+        # executor down while another thread spins it races on its guard condition (seen:
+        # the spin thread looping forever, holding the GIL, after close()).
+        self.stopping.set()
+        self.thread.join(timeout=5.0)
         self.executor.shutdown()
         self.node.destroy_node()
         self.context.try_shutdown()

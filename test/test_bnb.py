@@ -23,18 +23,14 @@ def small_room():
     return from_occupancy_grid(80, 60, 0.05, (0.0, 0.0, 0.0), grid.ravel())
 
 
-def brute_force_best(matcher, pts, d0, n_angles):
-    """The exact maximum over every leaf (free cell x angle), scored like the leaves."""
+def brute_force_leaves(matcher, pts, d0, n_angles):
+    """The score of every leaf (free cell x angle), scored like the search's leaves."""
     rows, cols = np.nonzero(matcher.map.free)
-    best = 0.0
-    for a in range(n_angles):
-        scores = matcher.bounds(0, cols, rows, np.full(len(cols), a), pts, d0)
-        best = max(best, float(scores.max()))
-    return best
+    return np.concatenate([matcher.bounds(0, cols, rows, np.full(len(cols), a), pts, d0) for a in range(n_angles)])
 
 
 @pytest.mark.parametrize('seed', [1, 2, 3])
-def test_branch_and_bound_finds_the_brute_force_maximum(seed):
+def test_branch_and_bound_finds_the_brute_force_maximum_and_every_pose_near_it(seed):
     m = small_room()
     rng = np.random.default_rng(seed)
     truth = sample_free_poses(m, 1, rng, clearance=0.3)[0]
@@ -44,8 +40,11 @@ def test_branch_and_bound_finds_the_brute_force_maximum(seed):
     search = matcher.last_search
     assert search['exact']
     pts = matcher.prepare(scan_to_points(scan).points)
-    d0 = 2 * math.pi / search['angles']
-    assert search['best_leaf'] == pytest.approx(brute_force_best(matcher, pts, d0, search['angles']), abs=1e-12)
+    scores = brute_force_leaves(matcher, pts, 2 * math.pi / search['angles'], search['angles'])
+    assert search['best_leaf'] == pytest.approx(scores.max(), abs=1e-12)
+    # every leaf within keep_ratio of the best was found (the hypotheses come from them)
+    raw = np.rint(scores * 255 * len(pts))
+    assert search['leaves'] == np.count_nonzero(raw >= matcher.options.keep_ratio * raw.max())
 
 
 def test_bounds_are_never_below_the_leaves_under_them():

@@ -92,6 +92,29 @@ def machine_info() -> dict:
             'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}
 
 
+def precompute_cost(m, size: int = 2000) -> dict:
+    """bnb's per-map precomputation on a size x size map (tiles of `m`): time, the grids'
+    bytes, and how much the process's peak memory grew (the numba kernels are compiled
+    or loaded from cache first, so their one-time cost is not counted)."""
+    import resource
+
+    from ..map_io import from_occupancy_grid
+    from ..matchers.bnb import BranchAndBoundMatcher
+    from ..matchers.bnb_kernel import warm_up
+    warm_up()
+    grid = np.where(m.occupied, 100, np.where(m.free, 0, -1))
+    reps = (size // grid.shape[0] + 1, size // grid.shape[1] + 1)
+    big = np.tile(grid, reps)[:size, :size]
+    big_map = from_occupancy_grid(size, size, m.resolution, (0.0, 0.0, 0.0), big[::-1].ravel())
+    peak0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t = time.perf_counter()
+    matcher = BranchAndBoundMatcher(big_map)
+    seconds = time.perf_counter() - t
+    peak1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return {'map': f'{size} x {size} cells (tiles of a {m.width} x {m.height} map)', 'seconds': round(seconds, 2),
+            'grid_mb': round(matcher.stack.nbytes / 1e6), 'peak_rss_growth_mb': round((peak1 - peak0) / 1024)}
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog='python -m global_loc.bench', description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='few poses and maps: a few minutes')
@@ -127,6 +150,8 @@ def main(argv=None) -> int:
             args.shared, args.scans_per_log or (12 if args.quick else 100), args.seed)
         trials += carmen
         maps.update(carmen_maps)
+    if 'bnb' in methods:
+        notes['bnb_precompute'] = precompute_cost(maps.get('building_31') or maps['office'])
     _MAPS.update(maps)
     jobs = [(i, t, m) for i, t in enumerate(trials) for m in methods
             if not (m not in ANGLE_STEP_METHODS and t.condition.get('angle_step', 5) != 5)]

@@ -121,6 +121,11 @@ def write_report(rows, meta, out, maps, trials) -> None:
                for log, lr in sorted(group(car, lambda r: r['log']).items())] + \
               ['', '![success per log](carmen.png)', '']
         plot_carmen(car, methods, out)
+    pre = meta.get('bnb_precompute')
+    if pre:
+        md += ['## bnb precomputation (once per map)', '',
+               f'On a {pre["map"]}: {pre["seconds"]} s, grids {pre["grid_mb"]} MB, peak memory of the process '
+               f'+{pre["peak_rss_growth_mb"]} MB.', '']
     md += failure_pictures(rows, trials, maps, out)
     with open(os.path.join(out, 'REPORT.md'), 'w') as f:
         f.write('\n'.join(md) + '\n')

@@ -13,9 +13,12 @@ its bound reads the scan, rotated to the node's middle angle, from grids whose c
 hold the field's maximum over the block, widened by the rotation's reach: a point at
 range r moves at most (2^h - 1) / 2 * r / r_max cells over the node's angles, plus one
 cell of rounding, so each point reads the grid widened just enough for its own range
-(near points, most of an indoor scan, get tight bounds). A bound is never below any leaf under
-it, and pruning by bound loses no pose scoring above the pruning threshold: the search
-is exact at cell and d0 resolution. The laser must stand on a free cell of the map.
+(near points, most of an indoor scan, get tight bounds). A bound is never below any leaf
+under it, and pruning by bound loses no pose scoring above the pruning threshold: the
+search is exact at cell and d0 resolution. Nodes are expanded best bound first
+(bnb_kernel, compiled), down to keep_ratio x the best leaf, so every pose scoring that
+high is found: the hypotheses, and the margin behind the confidence. The laser must
+stand on a free cell of the map.
 """
 from __future__ import annotations
 
@@ -30,6 +33,7 @@ from scipy.optimize import minimize
 from ..map_io import OccupancyMap
 from ..transform import Rigid2D
 from .base import Candidate, Matcher, Verdict, distinct
+from .bnb_kernel import make_heap, node_bounds, search_step, warm_up
 
 
 @dataclass
@@ -41,7 +45,7 @@ class BranchAndBoundOptions:
                                    # with the largest range, and far returns are the least sure)
     keep_ratio: float = 0.9        # nodes bounded above keep_ratio x best score are explored:
                                    # every pose scoring that high is found (the hypotheses)
-    max_nodes: int = 60000         # expansions; past it the search stops (and says it was not exhaustive)
+    max_nodes: int = 400000        # expansions; past it the search stops (and says it was not exhaustive)
     hypotheses: int = 8            # distinct poses refined and returned
     distinct_cells: float = 16.0   # poses closer than this (and < distinct_angle) are one peak
     distinct_angle: float = math.radians(20.0)
@@ -57,7 +61,8 @@ MARGINS = (0, 1, 2, 3, 5, 9, 17, 33)   # widenings (cells) for which grids are k
 
 class PrecomputationGridStack:
     """Per map, built once: the likelihood field, max-pooled uint8 grids per level and
-    widening, and per level whether a block holds a free cell. Memory: `nbytes`."""
+    widening (one array, `grids[index[level, widening]]`), and per level whether a
+    block holds a free cell. Memory: `nbytes`."""
 
     def __init__(self, occupancy_map: OccupancyMap, options: BranchAndBoundOptions):
         self.options = options
@@ -71,35 +76,39 @@ class PrecomputationGridStack:
         base = cv2.copyMakeBorder(np.rint(self.field * 255).astype(np.uint8), p, p, p, p, cv2.BORDER_CONSTANT, value=0)
         free = occupancy_map.free.astype(np.uint8)
         free = cv2.copyMakeBorder(free, p, p, p, p, cv2.BORDER_CONSTANT, value=0)
-        self.grids, self.free_blocks = {}, []
+        self.index: dict[tuple[int, int], int] = {}
         for h in range(options.levels):
-            size = 2 ** h
             for m in MARGINS:
-                width = size + 2 * m
-                self.grids[h, m] = base if width == 1 else \
-                    cv2.dilate(base, np.ones((width, width), np.uint8), anchor=(m, m))
+                self.index[h, m] = len(self.index)
                 if m >= self.margin(h):
                     break
-            # dilate's window at (x, y) spans [x - anchor, x - anchor + size): the block itself
-            self.free_blocks.append(free if size == 1 else
-                                    cv2.dilate(free, np.ones((size, size), np.uint8), anchor=(0, 0)))
-        self.nbytes = self.field.nbytes + sum(g.nbytes for g in self.grids.values() if g is not base) + \
-            base.nbytes + sum(f.nbytes for f in self.free_blocks)
+        self.grids = np.empty((len(self.index),) + base.shape, np.uint8)
+        self.free_blocks = np.empty((options.levels,) + free.shape, np.uint8)
+        for (h, m), i in self.index.items():
+            width = 2 ** h + 2 * m
+            # dilate's window at (x, y) spans [x - anchor, x - anchor + width): the block and m around it
+            cv2.dilate(base, np.ones((width, width), np.uint8), dst=self.grids[i], anchor=(m, m))
+        for h in range(options.levels):
+            size = 2 ** h
+            cv2.dilate(free, np.ones((size, size), np.uint8), dst=self.free_blocks[h], anchor=(0, 0))
+        self.nbytes = self.field.nbytes + self.grids.nbytes + self.free_blocks.nbytes
 
     @staticmethod
     def margin(level: int, range_fraction: float = 1.0) -> int:
         """Cells a point at range_fraction x r_max may move within a level-`level` node's
-        angles, plus one of rounding."""
+        2^level angles (about the middle one), plus one of rounding."""
         return 0 if level == 0 else int(math.ceil((2 ** level - 1) / 2.0 * range_fraction + 1e-3)) + 1
 
-    def margin_groups(self, level: int, ranges: np.ndarray, r_max: float) -> list[tuple[int, np.ndarray]]:
-        """(widening, indices of the points that need it) for one level."""
-        # margin() for every point at once (this runs in every bound evaluation)
-        need = np.zeros(len(ranges), int) if level == 0 else \
-            np.ceil((2 ** level - 1) / 2.0 * (ranges / r_max) + 1e-3).astype(int) + 1
-        available = np.array([m for m in MARGINS if (level, m) in self.grids])
-        use = available[np.searchsorted(available, need)]
-        return [(int(m), np.flatnonzero(use == m)) for m in np.unique(use)]
+    def grid_ids(self, ranges: np.ndarray, r_max: float) -> np.ndarray:
+        """(levels, points): the grid each point reads at each level, the one widened
+        just enough for the point's range."""
+        out = np.array([[self.index[h, 0]] * len(ranges) for h in range(self.options.levels)], np.int64)
+        for h in range(1, self.options.levels):
+            need = np.ceil((2 ** h - 1) / 2.0 * (ranges / r_max) + 1e-3).astype(int) + 1
+            available = np.array([m for m in MARGINS if (h, m) in self.index])
+            use = available[np.searchsorted(available, need)]
+            out[h] = [self.index[h, int(m)] for m in use]
+        return out
 
 
 class BranchAndBoundMatcher(Matcher):
@@ -111,6 +120,7 @@ class BranchAndBoundMatcher(Matcher):
         self.options = options or BranchAndBoundOptions()
         self.last_search: dict = {}
         self.stack = PrecomputationGridStack(occupancy_map, self.options)
+        warm_up()
 
     def judge(self, scores):
         """See BranchAndBoundOptions: a near-tie with another place is "ambiguous", a
@@ -156,45 +166,30 @@ class BranchAndBoundMatcher(Matcher):
         return np.rint(x).astype(np.int64), np.rint(-y).astype(np.int64)
 
     # ---- scoring -------------------------------------------------------------------
-    def bounds(self, level: int, tu, tv, ta, pts, d0) -> np.ndarray:
-        """Bounds (level > 0) or exact scores (level 0) of nodes (tu, tv, ta), in [0, 1].
-        All nodes at once: per-angle point offsets, one gather per widening group."""
-        p = self.stack.pad
-        ranges = np.hypot(pts[:, 0], pts[:, 1])
-        groups = self.stack.margin_groups(level, ranges, max(float(ranges.max()), 1e-9))
-        angles, which = np.unique(ta, return_inverse=True)
-        theta = (angles + (2 ** level - 1) / 2.0) * d0
-        c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
+    def tables(self, pts: np.ndarray, d0: float, n_angles: int):
+        """What the kernel reads for this scan: per level h, the points' cell offsets at
+        the middle angle of each node's angles (rows row_start[h] + a >> h), and the grid
+        each point reads (grid_ids)."""
         res = self.map.resolution
-        du = np.rint((c * pts[:, 0] - s * pts[:, 1]) / res).astype(np.int32)     # (angles, points)
+        ranges = np.hypot(pts[:, 0], pts[:, 1])
+        gid = self.stack.grid_ids(ranges, max(float(ranges.max()), 1e-9))
+        thetas, row_start = [], []
+        for h in range(self.options.levels):
+            row_start.append(sum(len(t) for t in thetas))
+            size = 2 ** h
+            thetas.append((np.arange(0, n_angles, size) + (size - 1) / 2.0) * d0)
+        theta = np.concatenate(thetas)
+        c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
+        du = np.rint((c * pts[:, 0] - s * pts[:, 1]) / res).astype(np.int32)     # (rows, points)
         dv = np.rint(-(s * pts[:, 0] + c * pts[:, 1]) / res).astype(np.int32)
-        height, width = self.stack.grids[0, 0].shape
-        out = np.zeros(len(tu), np.float64)
-        step = max(1, 4_000_000 // max(len(pts), 1))
-        for lo in range(0, len(tu), step):
-            sl = slice(lo, lo + step)
-            u = du[which[sl]] + (tu[sl, None] + p).astype(np.int32)
-            v = dv[which[sl]] + (tv[sl, None] + p).astype(np.int32)
-            # Outside the padded grid every grid is zero: clamping onto its zero border is exact.
-            np.clip(u, 0, width - 1, out=u)
-            np.clip(v, 0, height - 1, out=v)
-            flat = v * width + u
-            for m, idx in groups:
-                out[sl] += np.take(self.stack.grids[level, m].ravel(), flat[:, idx]).sum(axis=1, dtype=np.int64)
-        return out / (255.0 * len(pts))
+        return gid, du, dv, np.array(row_start, np.int64)
 
-    def free(self, level: int, tu, tv) -> np.ndarray:
-        p = self.stack.pad
-        return self.stack.free_blocks[level][tv + p, tu + p] > 0
-
-    @staticmethod
-    def children(tu, tv, ta, level):
-        """The 8 children (4 blocks x 2 angle halves) of each level-`level` node."""
-        half = 2 ** (level - 1)
-        du = np.array([0, half, 0, half, 0, half, 0, half])
-        dv = np.array([0, 0, half, half, 0, 0, half, half])
-        da = np.array([0, 0, 0, 0, half, half, half, half])
-        return ((tu[:, None] + du).ravel(), (tv[:, None] + dv).ravel(), (ta[:, None] + da).ravel())
+    def bounds(self, level: int, tu, tv, ta, pts, d0) -> np.ndarray:
+        """Bounds (level > 0) or exact scores (level 0) of nodes (tu, tv, ta), in [0, 1]."""
+        n_angles = int(round(2 * math.pi / d0))
+        raw = node_bounds(self.stack.grids, *self.tables(pts, d0, n_angles), self.stack.pad, np.asarray(tu, np.int64),
+                          np.asarray(tv, np.int64), np.asarray(ta, np.int64), level)
+        return raw / (255.0 * len(pts))
 
     # ---- search --------------------------------------------------------------------
     def match(self, points, options, progress=None):
@@ -205,75 +200,51 @@ class BranchAndBoundMatcher(Matcher):
         res = self.map.resolution
         r_max = max(float(np.hypot(pts[:, 0], pts[:, 1]).max()), 3 * res)
         top = opt.levels - 1
-        n_angles = int(math.ceil(2 * math.pi / math.acos(1 - res ** 2 / (2 * r_max ** 2)) / 2 ** top)) * 2 ** top
-        d0 = 2 * math.pi / n_angles
         step = 2 ** top
+        n_angles = int(math.ceil(2 * math.pi / math.acos(1 - res ** 2 / (2 * r_max ** 2)) / step)) * step
+        d0 = 2 * math.pi / n_angles
         gu, gv, ga = np.meshgrid(np.arange(0, self.map.width, step), np.arange(0, self.map.height, step),
                                  np.arange(0, n_angles, step), indexing='ij')
         tu, tv, ta = gu.ravel(), gv.ravel(), ga.ravel()
-        keep = self.free(top, tu, tv)
+        p = self.stack.pad
+        keep = self.stack.free_blocks[top][tv + p, tu + p] > 0
         tu, tv, ta = tu[keep], tv[keep], ta[keep]
         if len(tu) == 0:
             return []
-        b = self.bounds(top, tu, tv, ta, pts, d0)
-        leaves, exact = self.best_first(tu, tv, ta, b, top, pts, d0, n_angles, progress)
-        lu, lv, la, ls = leaves
+        tables = self.tables(pts, d0, n_angles)
+        b = node_bounds(self.stack.grids, *tables, p, tu, tv, ta, top)
+        leaves, expanded, exact = self.search(np.stack([tu, tv, ta, b], axis=1).astype(np.int64), tables,
+                                              n_angles, progress)
+        scale = 255.0 * len(pts)
+        lu, lv, la, ls = leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, 3] / scale
         self.last_search = {'exact': exact, 'angles': n_angles, 'points': len(pts), 'leaves': len(ls),
+                            'expansions': expanded, 'top_nodes': len(tu), 'per_level': self.per_level.tolist(),
                             'best_leaf': float(ls.max()) if len(ls) else 0.0}
         return self.refine_peaks(lu, lv, la, ls, pts, d0, progress)
 
-    def best_first(self, tu, tv, ta, b, top, pts, d0, n_angles, progress, batch: int = 512):
-        """Branch and bound, depth first, `batch` nodes expanded at a time. Every
-        node whose bound reaches keep_ratio x the best leaf so far is expanded; returns
-        the leaves scoring that high (u, v, angle index, score) and whether the search
+    def search(self, top_nodes, tables, n_angles, progress, slice_expansions: int = 20000):
+        """Best-first branch and bound (bnb_kernel.search_step), run in slices so that
+        progress is reported and a cancel is seen between them. Every node whose bound
+        reaches keep_ratio x the best leaf is expanded; returns the leaves scoring that
+        high (rows u, v, angle index, raw score), the expansions, and whether the search
         was exhaustive (False when max_nodes stopped it)."""
         opt = self.options
-        level = np.full(len(tu), top, np.int8)
-        lower, expanded = 0.0, 0
-        found = [np.zeros(0, np.int64)] * 3 + [np.zeros(0)]
-        while len(b):
-            threshold = opt.keep_ratio * lower
-            live = b >= threshold
-            tu, tv, ta, b, level = tu[live], tv[live], ta[live], b[live], level[live]
-            if not len(b):
+        heap = make_heap(top_nodes, opt.levels - 1)
+        best, expanded, found = 0, 0, []
+        self.per_level = np.zeros(opt.levels, np.int64)
+        while True:
+            budget = min(slice_expansions, opt.max_nodes - expanded)
+            best, n, done, leaves = search_step(self.stack.grids, self.stack.free_blocks, *tables, self.stack.pad,
+                                                self.map.width, self.map.height, n_angles, opt.keep_ratio,
+                                                heap, best, budget, self.per_level)
+            expanded += n
+            found.append(leaves)
+            if done or expanded >= opt.max_nodes:
                 break
-            if expanded >= opt.max_nodes:
-                return self._keep(found, threshold), False
-            # Deepest live nodes first, best bound first among them (Cartographer's depth-first
-            # order, in batches): leaves come early, and with them a pruning threshold.
-            deepest = np.flatnonzero(level == level.min())
-            pick = deepest[np.argpartition(-b[deepest], batch - 1)[:batch]] if len(deepest) > batch else deepest
-            rest = np.ones(len(b), bool)
-            rest[pick] = False
-            new = []
-            for h in np.unique(level[pick]):
-                sel = pick[level[pick] == h]
-                u, v, a = self.children(tu[sel], tv[sel], ta[sel], int(h))
-                ok = (u < self.map.width) & (v < self.map.height) & (a < n_angles)
-                u, v, a = u[ok], v[ok], a[ok]
-                ok = self.free(int(h) - 1, u, v)
-                u, v, a = u[ok], v[ok], a[ok]
-                cb = self.bounds(int(h) - 1, u, v, a, pts, d0)
-                expanded += len(sel)
-                if h == 1:   # children are leaves: exact scores
-                    if len(cb):
-                        lower = max(lower, float(cb.max()))
-                    found = [np.concatenate([f, x]) for f, x in zip(found, (u, v, a, cb))]
-                    found = self._keep(found, opt.keep_ratio * lower)
-                else:
-                    new.append((u, v, a, cb, np.full(len(u), h - 1, np.int8)))
-            tu, tv, ta, b, level = tu[rest], tv[rest], ta[rest], b[rest], level[rest]
-            for u, v, a, cb, lv in new:
-                tu, tv, ta = np.concatenate([tu, u]), np.concatenate([tv, v]), np.concatenate([ta, a])
-                b, level = np.concatenate([b, cb]), np.concatenate([level, lv])
-            if progress:
-                progress(min(0.95, expanded / opt.max_nodes), lower)
-        return self._keep(found, opt.keep_ratio * lower), True
-
-    @staticmethod
-    def _keep(found, threshold):
-        keep = found[3] >= threshold
-        return [f[keep] for f in found]
+            if progress:   # the server's progress callback raises Cancelled on a cancel request
+                progress(min(0.95, expanded / opt.max_nodes), best / (255.0 * tables[1].shape[1]))
+        leaves = np.concatenate(found)
+        return leaves[leaves[:, 3] >= opt.keep_ratio * best], expanded, bool(done)
 
     # ---- peaks and refinement ----------------------------------------------------
     def refine_peaks(self, tu, tv, ta, scores, pts, d0, progress):
