@@ -6,7 +6,8 @@
 #      build host's /opt/python/cp311-cp311/...);
 #   3. colcon build of global_loc_interfaces and global_loc into install/;
 #   4. a `ros2` command supporting `ros2 run` / `ros2 pkg`, when no real one exists;
-#   5. env.sh, which any shell sources to get all of the above.
+#   5. env.sh, which any shell sources to get all of the above;
+#   6. the bnb matcher's numba kernels compiled into numba's on-disk cache.
 # Idempotent: every step is skipped when its inputs did not change.
 set -euo pipefail
 
@@ -119,4 +120,15 @@ export GLOBAL_LOC_ROOT="$ROOT"
 unset _gl_venv _gl_u
 ENV
 mv "$ROOT/env.sh.tmp" "$ROOT/env.sh"
+
+# ---- 6. the bnb matcher's compiled kernels ---------------------------------------
+# numba compiles them on first use (~15 s) and caches the result beside the source;
+# doing it here keeps that out of the first server start or test.
+kernel_stamp="$ROOT/install/.global_loc_kernels"
+want=$(hash_of global_loc/matchers/bnb_kernel.py constraints.txt)
+if [ "$(cat "$kernel_stamp" 2>/dev/null)" != "$want" ]; then
+  say "compiling the bnb kernels (numba, cached)"
+  (. "$ROOT/env.sh" && python -c "from global_loc.matchers.bnb_kernel import warm_up; warm_up()")
+  echo "$want" > "$kernel_stamp"
+fi
 say "ready: source $ROOT/env.sh"
