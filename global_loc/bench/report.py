@@ -80,8 +80,11 @@ def write_report(rows, meta, out, maps, trials) -> None:
            f'"time / baseline": median time over the thesis baseline ({BASELINE}, Δα = 5°) on the same trials '
            'of the same run (< 1 is faster).', '',
            'Maps: ' + ', '.join(f'{n} ({v})' for n, v in meta['maps'].items()) + '.', '']
-    reading = os.path.join(os.path.dirname(os.path.dirname(out.rstrip('/'))), 'READING.md')
-    if not meta['quick'] and os.path.exists(reading):   # the hand-written reading of the full run
+    benchmarks = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                              'benchmarks')
+    reading = os.path.join(benchmarks, 'READING.md')
+    # the hand-written reading belongs to the committed report only
+    if os.path.abspath(out) == os.path.join(benchmarks, 'results') and os.path.exists(reading):
         md += [open(reading).read(), '']
 
     if 'sim' in by_suite:

@@ -1,0 +1,51 @@
+"""The benchmark's worker processes: one (trial, method) localization per job. In a
+module of its own because spawned workers cannot import functions from a __main__."""
+from __future__ import annotations
+
+import math
+
+from ..localizer import Localizer, pose_error
+
+_MAPS = {}        # map name -> OccupancyMap, in each worker (set by worker_init)
+_LOCALIZERS = {}  # per worker process
+
+
+def run_job(job):
+    """One (trial, method) localization in a worker; returns a row."""
+    trial_id, trial, method = job
+    loc = _LOCALIZERS.get(trial.map_name)
+    if loc is None:
+        loc = _LOCALIZERS[trial.map_name] = Localizer(_MAPS[trial.map_name])
+    row = {'trial': trial_id, 'suite': trial.suite, 'map': trial.map_name, **trial.condition, 'method': method,
+           'local_map_cells': trial.local_map_cells,
+           'truth': [round(v, 4) for v in trial.truth.as_tuple()]}
+    step = trial.condition.get('angle_step', 5)
+    try:
+        if trial.points is not None:
+            res = loc.localize_points(trial.points, method, step)
+        else:
+            res = loc.localize(trial.scan, method, step, base_T_laser=trial.base_T_laser)
+    except Exception as e:   # a failure of a method on one trial is a data point, not a crash
+        return {**row, 'error': f'{type(e).__name__}: {e}', 'ok': False, 'ok_loose': False, 'success': False,
+                'time_s': float('nan')}
+    row.update(time_s=res.time_s, success=res.success, confidence=res.confidence,
+               score=res.score if math.isfinite(res.score) else None, found=res.pose is not None,
+               top4_ok=any(_ok(pose_error(h.pose, trial.truth), 0.2, 5) for h in res.hypotheses[:4]),
+               hyp_scores=[round(h.score, 4) for h in res.hypotheses[:4]], message=res.message.split(':')[0])
+    if res.pose is None:
+        row.update(ok=False, ok_loose=False)
+    else:
+        err = pose_error(res.pose, trial.truth)
+        row.update(estimate=[round(v, 4) for v in res.pose.as_tuple()], err_xy=round(err[0], 4),
+                   err_yaw_deg=round(err[1], 3), ok=_ok(err, 0.2, 5), ok_loose=_ok(err, 0.5, 10))
+    return row
+
+
+def _ok(err, d, a):
+    return bool(err[0] < d and err[1] < a)
+
+
+def worker_init(maps):
+    import cv2
+    cv2.setNumThreads(1)   # the workers share the cores; OpenCV's own threads would fight them
+    _MAPS.update(maps)
