@@ -224,7 +224,7 @@ class GlobalLocServer(Node):
         msg = self.wait_for_fresh_scan(goal_handle, start, timeout)
         if msg is None:
             return self.finish(goal_handle, 'abort', f'no scan on {self.scan_topic} within {timeout:.1f} s')
-        self.feedback(goal_handle, 0.05, 'building_local_map', 0.0)
+        self.feedback(goal_handle, 0.05, 'preparing_scan', 0.0)   # local map or points, per method
         self.get_logger().info(f'matching a scan of {len(msg.ranges)} beams')
         base_T_laser = self.base_T_laser(msg.header.frame_id)
         last = [0.0]
