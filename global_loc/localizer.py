@@ -15,8 +15,7 @@ import numpy as np
 
 from .map_io import OccupancyMap
 from .matchers import MatchOptions, make_matcher, resolve_method
-from .matchers.base import distinct
-from .matchers.base import ProgressFn
+from .matchers.base import ProgressFn, distinct
 from .scan import Scan, ScanPoints, scan_to_points
 from .transform import Rigid2D, covariance_of_composition
 

@@ -40,9 +40,12 @@ def distinct(candidates: list[Candidate], k: int, min_distance: float, min_angle
     """Non-maximum suppression in (x, y, yaw): the best k candidates no two of which are
     within min_distance metres *and* min_angle radians of each other."""
     kept: list[Candidate] = []
+    def apart(c, o):
+        d, a = c.laser_pose.distance_to(o.laser_pose)
+        return d >= min_distance or a >= min_angle
+
     for c in sorted(candidates, key=lambda c: -c.score):
-        if all(c.laser_pose.distance_to(o.laser_pose)[0] >= min_distance or
-               c.laser_pose.distance_to(o.laser_pose)[1] >= min_angle for o in kept):
+        if all(apart(c, o) for o in kept):
             kept.append(c)
             if len(kept) == k:
                 break

@@ -71,7 +71,7 @@ class PrecomputationGridStack:
             else np.full(occupied.shape, 1e6, np.float32)
         self.field = np.exp(-(dist.astype(np.float32) ** 2) / (2.0 * options.sigma_cells ** 2))
         top = options.levels - 1
-        self.pad = (2 ** top) + 2 * self.margin(top) + 2
+        self.pad = (2 ** top) + 2 * int(self.margin(top)) + 2
         p = self.pad
         base = cv2.copyMakeBorder(np.rint(self.field * 255).astype(np.uint8), p, p, p, p, cv2.BORDER_CONSTANT, value=0)
         free = occupancy_map.free.astype(np.uint8)
@@ -94,17 +94,20 @@ class PrecomputationGridStack:
         self.nbytes = self.field.nbytes + self.grids.nbytes + self.free_blocks.nbytes
 
     @staticmethod
-    def margin(level: int, range_fraction: float = 1.0) -> int:
+    def margin(level: int, range_fraction=1.0):
         """Cells a point at range_fraction x r_max may move within a level-`level` node's
-        2^level angles (about the middle one), plus one of rounding."""
-        return 0 if level == 0 else int(math.ceil((2 ** level - 1) / 2.0 * range_fraction + 1e-3)) + 1
+        2^level angles (about the middle one), plus one of rounding. range_fraction may
+        be an array (one per point)."""
+        if level == 0:
+            return np.zeros_like(range_fraction, dtype=int)
+        return np.ceil((2 ** level - 1) / 2.0 * np.asarray(range_fraction) + 1e-3).astype(int) + 1
 
     def grid_ids(self, ranges: np.ndarray, r_max: float) -> np.ndarray:
         """(levels, points): the grid each point reads at each level, the one widened
         just enough for the point's range."""
         out = np.array([[self.index[h, 0]] * len(ranges) for h in range(self.options.levels)], np.int64)
         for h in range(1, self.options.levels):
-            need = np.ceil((2 ** h - 1) / 2.0 * (ranges / r_max) + 1e-3).astype(int) + 1
+            need = self.margin(h, ranges / r_max)
             available = np.array([m for m in MARGINS if (h, m) in self.index])
             use = available[np.searchsorted(available, need)]
             out[h] = [self.index[h, int(m)] for m in use]
@@ -140,7 +143,7 @@ class BranchAndBoundMatcher(Matcher):
         conf = float(np.clip(margin / (1.0 - opt.keep_ratio), 0.0, 1.0)) * explained
         if conf >= opt.min_confidence:
             return Verdict(True, conf, 'localized')
-        if explained < 1.0 and explained * 1.0 < opt.min_confidence:
+        if explained < 1.0 and explained < opt.min_confidence:
             return Verdict(False, conf, f'poor match: the map explains about {100 * best:.0f}% of the scan')
         close = sum(s >= best * (1.0 - 2 * margin) for s in scores[1:]) if margin > 0 else len(scores) - 1
         return Verdict(False, conf, f'ambiguous: {max(close, 1)} other place(s) match within '
@@ -206,12 +209,12 @@ class BranchAndBoundMatcher(Matcher):
             return []
         tables = self.tables(pts, d0, n_angles)
         b = node_bounds(self.stack.grids, *tables, p, tu, tv, ta, top)
-        leaves, expanded, exact = self.search(np.stack([tu, tv, ta, b], axis=1).astype(np.int64), tables,
+        leaves, per_level, exact = self.search(np.stack([tu, tv, ta, b], axis=1).astype(np.int64), tables,
                                               n_angles, progress)
         scale = 255.0 * len(pts)
         lu, lv, la, ls = leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, 3] / scale
         self.last_search = {'exact': exact, 'angles': n_angles, 'points': len(pts), 'leaves': len(ls),
-                            'expansions': expanded, 'top_nodes': len(tu), 'per_level': self.per_level.tolist(),
+                            'expansions': int(per_level.sum()), 'top_nodes': len(tu), 'per_level': per_level.tolist(),
                             'best_leaf': float(ls.max()) if len(ls) else 0.0}
         return self.refine_peaks(lu, lv, la, ls, pts, d0, progress)
 
@@ -219,17 +222,17 @@ class BranchAndBoundMatcher(Matcher):
         """Best-first branch and bound (bnb_kernel.search_step), run in slices so that
         progress is reported and a cancel is seen between them. Every node whose bound
         reaches keep_ratio x the best leaf is expanded; returns the leaves scoring that
-        high (rows u, v, angle index, raw score), the expansions, and whether the search
-        was exhaustive (False when max_nodes stopped it)."""
+        high (rows u, v, angle index, raw score), the expansions per level, and whether
+        the search was exhaustive (False when max_nodes stopped it)."""
         opt = self.options
         heap = make_heap(top_nodes, opt.levels - 1)
         best, expanded, found = 0, 0, []
-        self.per_level = np.zeros(opt.levels, np.int64)
+        per_level = np.zeros(opt.levels, np.int64)
         while True:
             budget = min(slice_expansions, opt.max_nodes - expanded)
             best, n, done, leaves = search_step(self.stack.grids, self.stack.free_blocks, *tables, self.stack.pad,
                                                 self.map.width, self.map.height, n_angles, opt.keep_ratio,
-                                                heap, best, budget, self.per_level)
+                                                heap, best, budget, per_level)
             expanded += n
             found.append(leaves)
             if done or expanded >= opt.max_nodes:
@@ -237,7 +240,7 @@ class BranchAndBoundMatcher(Matcher):
             if progress:   # the server's progress callback raises Cancelled on a cancel request
                 progress(min(0.95, expanded / opt.max_nodes), best / (255.0 * tables[1].shape[1]))
         leaves = np.concatenate(found)
-        return leaves[leaves[:, 3] >= opt.keep_ratio * best], expanded, bool(done)
+        return leaves[leaves[:, 3] >= opt.keep_ratio * best], per_level, bool(done)
 
     # ---- peaks and refinement ----------------------------------------------------
     def bin_maxima(self, tu, tv, ta, scores, d0, limit: int = 512) -> np.ndarray:
