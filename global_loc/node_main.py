@@ -1,6 +1,8 @@
 """The one way the package's nodes run: init, build, spin until SIGINT/SIGTERM, clean up."""
 from __future__ import annotations
 
+import faulthandler
+import signal
 import sys
 from typing import Callable, Optional
 
@@ -12,6 +14,8 @@ def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]
              startup_errors: tuple = (), args=None) -> int:
     """Spin the node `make_node()` builds; return the exit code. An exception listed in
     `startup_errors` (e.g. a map that cannot be loaded) is printed as one line and exits 1."""
+    # `kill -USR1` prints every thread's stack: how a node that does not stop is diagnosed.
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     rclpy.init(args=args)
     node = executor = None
     code = 0

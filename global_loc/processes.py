@@ -6,6 +6,7 @@ import random
 import shutil
 import signal
 import subprocess
+import sys
 import time
 
 def isolated_env() -> dict:
@@ -51,8 +52,14 @@ class Process:
             try:
                 self.proc.wait(timeout)
             except subprocess.TimeoutExpired:
+                # Ask for every thread's stack (run_node registers SIGUSR1 with faulthandler)
+                # so a hang at exit leaves a trace in the log, then kill.
+                os.killpg(self.proc.pid, signal.SIGUSR1)
+                time.sleep(1.0)
                 os.killpg(self.proc.pid, signal.SIGKILL)
                 self.proc.wait()
+                print(f'{self.log_path}: no exit within {timeout} s of SIGTERM; killed. Its log ends:\n'
+                      f'{self.output()[-6000:]}', file=sys.stderr)
         self.log.close()
         return self.proc.returncode
 
