@@ -97,7 +97,7 @@ class Localizer:
         result = LocalizationResult(False, '', matcher.name, time_s=elapsed, dropped=points.dropped,
                                     hypotheses=hyps,
                                     covariance=np.diag([cfg.covariance_xy, cfg.covariance_xy, cfg.covariance_yaw]))
-        verdict = matcher.judge([h.score for h in hyps])
+        verdict = matcher.judge(best)
         result.success, result.confidence, result.message = verdict.success, verdict.confidence, verdict.message
         if not hyps:
             return result

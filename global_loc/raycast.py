@@ -73,4 +73,4 @@ def points_cut_from_map(occupancy_map: OccupancyMap, laser_pose: Rigid2D, radius
     rows, cols = np.nonzero(occupancy_map.surface_image())
     xy = occupancy_map.pixel_to_world(np.stack([cols, rows], axis=1).astype(float))
     near = np.hypot(xy[:, 0] - laser_pose.x, xy[:, 1] - laser_pose.y) < radius
-    return ScanPoints(laser_pose.inverse().apply(xy[near]), float(radius), int(near.sum()))
+    return ScanPoints(laser_pose.inverse().apply(xy[near]), float(radius), int(near.sum()), beams=False)

@@ -50,6 +50,12 @@ class ScanPoints:
     range_max: float
     num_beams: int
     dropped: dict = field(default_factory=dict)   # reason -> count of readings dropped
+    # Laser-frame angles of beams that saw nothing within range_max (+inf, or a reading at
+    # range_max): evidence that the space along them is free, which a match can contradict.
+    no_return_angles: np.ndarray = field(default_factory=lambda: np.empty(0))
+    # False for points that are not beam end points (a local map cut from the map: its
+    # walls need not be visible from the centre), so nothing can be said about free space.
+    beams: bool = True
 
 
 def scan_to_points(scan: Scan) -> ScanPoints:
@@ -80,4 +86,6 @@ def scan_to_points(scan: Scan) -> ScanPoints:
                         f'(dropped: {", ".join(f"{k}={v}" for k, v in dropped.items() if v)})')
     r, a = ranges[ok], angles[ok]
     pts = np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
-    return ScanPoints(pts, float(scan.range_max), int(ranges.size), dropped)
+    # -inf is "too close to measure" (REP 117), NaN unknown: neither says the beam's path is free.
+    no_return = (inf & (ranges > 0)) | high
+    return ScanPoints(pts, float(scan.range_max), int(ranges.size), dropped, angles[no_return])

@@ -125,3 +125,49 @@ def test_covariance_of_composition_matches_a_numeric_jacobian():
         minus = Rigid2D(*(np.array(pose.as_tuple()) - d)) * child
         jac[:, i] = (np.array(plus.as_tuple()) - np.array(minus.as_tuple())) / (2 * eps)
     assert covariance_of_composition(pose, cov, child) == pytest.approx(jac @ cov @ jac.T, abs=1e-9)
+
+
+def twin_rooms(door_b_closed: bool, chair_in: str):
+    """Two identical 4 x 3.5 m rooms (A left, B right) off one long featureless corridor,
+    each with a door onto it; B's door may be closed, and a 0.3 m chair may stand in one."""
+    res = 0.05
+    w, h = int(24 / res), int(5.5 / res)
+    grid = np.zeros((h, w), dtype=int)
+
+    def occ(x0, x1, y0, y1, value=100):      # a box in metres (y up)
+        rows = slice(h - int(round(y1 / res)), h - int(round(y0 / res)))
+        grid[rows, int(round(x0 / res)):int(round(x1 / res))] = value
+
+    occ(0, 24, 0, 0.05), occ(0, 24, 5.45, 5.5), occ(0, 0.05, 0, 5.5), occ(23.95, 24, 0, 5.5)
+    occ(0, 24, 2.0, 2.05)                                   # the rooms' wall onto the corridor
+    for x in (2, 6, 16, 20):
+        occ(x, x + 0.05, 2.0, 5.5)
+    occ(3.6, 4.4, 2.0, 2.05, 0)                            # A's door
+    if not door_b_closed:
+        occ(17.6, 18.4, 2.0, 2.05, 0)                      # B's door
+    cx = {'A': 5.0, 'B': 19.0}[chair_in]
+    occ(cx, cx + 0.3, 4.2, 4.5)
+    return from_occupancy_grid(w, h, res, (0.0, 0.0, 0.0), grid[::-1].ravel())
+
+
+def test_a_match_whose_beams_pass_through_walls_is_ranked_below_one_that_does_not():
+    """The robot stands in room A, looking out through A's open door; A's chair is mapped
+    in B, so the scan's end points fit B better, but B's door is closed: a third of the
+    beams would pass through it. A comes first; the result stays ambiguous (on the end
+    points alone B is as good), with B among the hypotheses."""
+    world = twin_rooms(door_b_closed=False, chair_in='A')
+    mapped = twin_rooms(door_b_closed=True, chair_in='B')
+    truth = Rigid2D(4.0, 3.4, -math.pi / 2 + 0.2)
+    scan = simulate_scan(world, truth, 270.0, 541, 6.0, noise_std=0.005, rng=np.random.default_rng(7))
+    matcher = BranchAndBoundMatcher(mapped)
+    candidates = matcher.match(scan_to_points(scan), MatchOptions())
+    twin_in_b = Rigid2D(truth.x + 14.0, truth.y, truth.yaw)
+    in_b = [c for c in candidates if pose_error(c.laser_pose, twin_in_b)[0] < 0.1]
+    assert in_b, 'B should be a hypothesis'
+    assert in_b[0].explained > candidates[0].explained           # the end points alone prefer B ...
+    assert in_b[0].see_through > candidates[0].see_through + 0.1  # ... but its beams cross B's door
+    d, a = pose_error(candidates[0].laser_pose, truth)
+    assert d < 0.1 and a < 2.0
+    result = Localizer(mapped).localize(scan, method='bnb')
+    assert not result.success and result.message.startswith('ambiguous'), result.message
+    assert pose_error(result.pose, truth)[0] < 0.1

@@ -34,6 +34,8 @@ class Candidate:
     laser_pose: Rigid2D    # laser frame in the map frame
     score: float           # higher is better; scale depends on the matcher
     covariance: Optional[np.ndarray] = None   # 3x3 (x, y, yaw) of laser_pose, when the matcher knows it
+    explained: Optional[float] = None      # bnb: fraction of the scan's points the map explains at this pose
+    see_through: Optional[float] = None    # bnb: fraction of the beams that would pass through mapped walls
 
 
 def distinct(candidates: list[Candidate], k: int, min_distance: float, min_angle: float) -> list[Candidate]:
@@ -75,10 +77,11 @@ class Matcher(ABC):
     def __init__(self, occupancy_map: OccupancyMap):
         self.map = occupancy_map
 
-    def judge(self, scores: list[float]) -> Verdict:
-        """Success and confidence from the distinct hypotheses' scores, best first. The
-        thesis matchers: success = best score at least min_score; confidence = how far
-        the best stands above the next, relative to it."""
+    def judge(self, candidates: list[Candidate]) -> Verdict:
+        """Success and confidence from the distinct hypotheses, best first. The thesis
+        matchers: success = best score at least min_score; confidence = how far the best
+        stands above the next, relative to it."""
+        scores = [c.score for c in candidates]
         if not scores:
             return Verdict(False, 0.0, f'{self.name} found no match')
         best = scores[0]

@@ -19,6 +19,16 @@ search is exact at cell and d0 resolution. Nodes are expanded best bound first
 (bnb_kernel, compiled), down to keep_ratio x the best leaf, so every pose scoring that
 high is found: the hypotheses, and the margin behind the confidence. The laser must
 stand on a free cell of the map.
+
+Free space: the field only rewards end points, so a pose whose beams pass through mapped
+walls to reach them (a corridor matched 180 deg reversed, a twin room behind a closed
+door) can score as high as the truth. Each refined hypothesis is therefore also checked
+ray by ray (bnb_kernel.see_through): the fraction of beams, returns and no-returns, that
+cross an occupied cell before their end. The ranking score is the field score less that
+fraction beyond the least of all hypotheses (transient things in the map - people, doors
+- make every pose pay some on real maps). It can reorder the hypotheses, but a confident
+answer also needs a margin on the field score alone: the ray test decides between poses,
+it never vouches for one.
 """
 from __future__ import annotations
 
@@ -27,13 +37,12 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.ndimage import map_coordinates
 from scipy.optimize import minimize
 
 from ..map_io import OccupancyMap
 from ..transform import Rigid2D
 from .base import Candidate, Matcher, Verdict, distinct
-from .bnb_kernel import make_heap, node_bounds, search_step, warm_up
+from .bnb_kernel import field_means, make_heap, node_bounds, offset_tables, search_step, see_through, warm_up
 
 
 @dataclass
@@ -49,6 +58,8 @@ class BranchAndBoundOptions:
     hypotheses: int = 8            # distinct poses refined and returned
     distinct_cells: float = 16.0   # poses closer than this (and < distinct_angle) are one peak
     distinct_angle: float = math.radians(20.0)
+    see_through_tolerance_cells: float = 3.0   # a return's beam is checked up to this short of
+                                   # its end (noise, the wall's cells, grazing beams)
     # Confidence = (margin of the best over the next distinct peak, relative to the best,
     # over 1 - keep_ratio, the largest margin the search can see) x (how much of the
     # scan the map explains: (score - 0.3) / 0.3, clipped). success: confidence at least
@@ -67,6 +78,7 @@ class PrecomputationGridStack:
     def __init__(self, occupancy_map: OccupancyMap, options: BranchAndBoundOptions):
         self.options = options
         occupied = occupancy_map.occupied
+        self.occupied = occupied.astype(np.uint8)     # for the free-space check
         dist = cv2.distanceTransform((~occupied).astype(np.uint8), cv2.DIST_L2, 5) if occupied.any() \
             else np.full(occupied.shape, 1e6, np.float32)
         self.field = np.exp(-(dist.astype(np.float32) ** 2) / (2.0 * options.sigma_cells ** 2))
@@ -91,7 +103,7 @@ class PrecomputationGridStack:
         for h in range(options.levels):
             size = 2 ** h
             cv2.dilate(free, np.ones((size, size), np.uint8), dst=self.free_blocks[h], anchor=(0, 0))
-        self.nbytes = self.field.nbytes + self.grids.nbytes + self.free_blocks.nbytes
+        self.nbytes = self.field.nbytes + self.grids.nbytes + self.free_blocks.nbytes + self.occupied.nbytes
 
     @staticmethod
     def margin(level: int, range_fraction=1.0):
@@ -125,27 +137,39 @@ class BranchAndBoundMatcher(Matcher):
         self.stack = PrecomputationGridStack(occupancy_map, self.options)
         warm_up()
 
-    def judge(self, scores):
+    def judge(self, candidates):
         """See BranchAndBoundOptions: a near-tie with another place is "ambiguous", a
-        scan the map explains poorly is a "poor match"; neither is a success."""
+        scan the map explains poorly is a "poor match"; neither is a success. The margin
+        is the smaller of the ranking score's (free space counted) and the field score's
+        (see the module doc)."""
         opt = self.options
-        if not scores:
+        if not candidates:
             return Verdict(False, 0.0, 'bnb found no pose on free space')
         if not self.last_search.get('exact', True):
             # The node budget ran out: a better place may be unexplored, so no margin holds.
             return Verdict(False, 0.0, f'search incomplete: stopped after {opt.max_nodes} node expansions; '
                                        f'best of what was explored, see the hypotheses')
-        best = scores[0]
-        # No other peak found means none scored above keep_ratio x best.
-        second = scores[1] if len(scores) > 1 else opt.keep_ratio * best
-        margin = (best - second) / best if best > 0 else 0.0
-        explained = float(np.clip((best - 0.3) / 0.3, 0.0, 1.0))
+        best, others = candidates[0], candidates[1:]
+        fit = [c.score if c.explained is None else c.explained for c in candidates]
+        # No other peak found means none scored above keep_ratio x best (in either score).
+        second = others[0].score if others else opt.keep_ratio * best.score
+        rival = max(fit[1:] + [opt.keep_ratio * max(fit)])
+        rank_margin = (best.score - second) / best.score if best.score > 0 else 0.0
+        fit_margin = (fit[0] - rival) / fit[0] if fit[0] > 0 else 0.0
+        margin = min(rank_margin, fit_margin)
+        explained = float(np.clip((fit[0] - 0.3) / 0.3, 0.0, 1.0))
         conf = float(np.clip(margin / (1.0 - opt.keep_ratio), 0.0, 1.0)) * explained
         if conf >= opt.min_confidence:
             return Verdict(True, conf, 'localized')
         if explained < 1.0 and explained < opt.min_confidence:
-            return Verdict(False, conf, f'poor match: the map explains about {100 * best:.0f}% of the scan')
-        close = sum(s >= best * (1.0 - 2 * margin) for s in scores[1:]) if margin > 0 else len(scores) - 1
+            return Verdict(False, conf, f'poor match: the map explains about {100 * fit[0]:.0f}% of the scan')
+        if fit_margin < 0 and others:
+            rival_c = max(others, key=lambda c: c.score if c.explained is None else c.explained)
+            return Verdict(False, conf, f'ambiguous: another place explains the scan as well or better, but '
+                                        f'{100 * (rival_c.see_through or 0.0):.0f}% of its beams would pass through '
+                                        f'walls ({100 * (best.see_through or 0.0):.0f}% for the best); '
+                                        f'see the hypotheses')
+        close = sum(c.score >= best.score * (1.0 - 2 * margin) for c in others) if margin > 0 else len(others)
         return Verdict(False, conf, f'ambiguous: {max(close, 1)} other place(s) match within '
                                     f'{100 * margin:.1f}% of the best; see the hypotheses')
 
@@ -174,10 +198,7 @@ class BranchAndBoundMatcher(Matcher):
             row_start.append(sum(len(t) for t in thetas))
             size = 2 ** h
             thetas.append((np.arange(0, n_angles, size) + (size - 1) / 2.0) * d0)
-        theta = np.concatenate(thetas)
-        c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
-        du = np.rint((c * pts[:, 0] - s * pts[:, 1]) / res).astype(np.int32)     # (rows, points)
-        dv = np.rint(-(s * pts[:, 0] + c * pts[:, 1]) / res).astype(np.int32)
+        du, dv = offset_tables(np.concatenate(thetas), pts[:, 0] / res, pts[:, 1] / res)   # (rows, points)
         return gid, du, dv, np.array(row_start, np.int64)
 
     def bounds(self, level: int, tu, tv, ta, pts, d0) -> np.ndarray:
@@ -216,7 +237,7 @@ class BranchAndBoundMatcher(Matcher):
         self.last_search = {'exact': exact, 'angles': n_angles, 'points': len(pts), 'leaves': len(ls),
                             'expansions': int(per_level.sum()), 'top_nodes': len(tu), 'per_level': per_level.tolist(),
                             'best_leaf': float(ls.max()) if len(ls) else 0.0}
-        return self.refine_peaks(lu, lv, la, ls, pts, d0, progress)
+        return self.refine_peaks(lu, lv, la, ls, pts, d0, points, progress)
 
     def search(self, top_nodes, tables, n_angles, progress, slice_expansions: int = 20000):
         """Best-first branch and bound (bnb_kernel.search_step), run in slices so that
@@ -258,7 +279,7 @@ class BranchAndBoundMatcher(Matcher):
         best = order[first]
         return best[np.argsort(-scores[best], kind='stable')][:limit]
 
-    def refine_peaks(self, tu, tv, ta, scores, pts, d0, progress):
+    def refine_peaks(self, tu, tv, ta, scores, pts, d0, points, progress):
         opt = self.options
         leaves = [Candidate(self.laser_pose(float(tu[i]), float(tv[i]), float(ta[i] * d0)), float(scores[i]))
                   for i in self.bin_maxima(tu, tv, ta, scores, d0)]
@@ -269,13 +290,35 @@ class BranchAndBoundMatcher(Matcher):
             g = grid_T_map * c.laser_pose
             u, v = self.map.grid_to_pixel([[g.x, g.y]])[0]
             starts.append((float(u), float(v), g.yaw))
-        refined = sorted((self.refine(u, v, yaw, pts) for u, v, yaw in starts), key=lambda r: -r[3])
-        out = [Candidate(self.laser_pose(u, v, yaw), score) for u, v, yaw, score in refined]
+        refined = np.array([self.refine(u, v, yaw, pts) for u, v, yaw in starts]).reshape(-1, 4)
+        through = self.see_through_fractions(refined[:, :3], points)
+        rank = refined[:, 3] * (1.0 - (through - through.min(initial=0.0)))
+        order = np.argsort(-rank, kind='stable')
+        out = [Candidate(self.laser_pose(*refined[i, :3]), float(rank[i]), explained=float(refined[i, 3]),
+                         see_through=float(through[i])) for i in order]
         if out:
-            out[0].covariance = self.landscape_covariance(*refined[0][:3], pts)
+            out[0].covariance = self.landscape_covariance(*refined[order[0], :3], pts)
         if progress:
             progress(1.0, out[0].score if out else 0.0)
         return out
+
+    def see_through_fractions(self, poses: np.ndarray, points) -> np.ndarray:
+        """Per pose (rows u, v, grid-frame yaw): the fraction of the scan's beams that would
+        pass through an occupied cell - a return's beam up to see_through_tolerance_cells
+        short of its end point, a no-return beam over its whole range (up to max_range)."""
+        opt = self.options
+        res = self.map.resolution
+        ranges = np.hypot(points.points[:, 0], points.points[:, 1])
+        near = ranges <= opt.max_range
+        angles = np.concatenate([np.arctan2(points.points[near, 1], points.points[near, 0]),
+                                 points.no_return_angles])
+        lengths = np.concatenate([ranges[near] / res - opt.see_through_tolerance_cells,
+                                  np.full(len(points.no_return_angles), min(points.range_max, opt.max_range) / res)])
+        if len(poses) == 0 or len(angles) == 0 or not points.beams:
+            return np.zeros(len(poses))
+        crossed = see_through(self.stack.occupied, np.ascontiguousarray(poses, np.float64),
+                              angles.astype(np.float64), lengths.astype(np.float64))
+        return crossed / len(angles)
 
     def landscape_covariance(self, u, v, yaw, pts, half: int = 3) -> np.ndarray:
         """(x, y, yaw) covariance in the map frame from the score landscape around a
@@ -286,12 +329,8 @@ class BranchAndBoundMatcher(Matcher):
         d_yaw = res / max(float(np.hypot(pts[:, 0], pts[:, 1]).max()), res)
         steps = np.arange(-half, half + 1, dtype=float)
         du, dv, da = (g.ravel() for g in np.meshgrid(steps, steps, steps * d_yaw, indexing='ij'))
-        c, s = np.cos(yaw + da)[:, None], np.sin(yaw + da)[:, None]
-        x = u + du[:, None] + (c * pts[:, 0] - s * pts[:, 1]) / res
-        y = v + dv[:, None] - (s * pts[:, 0] + c * pts[:, 1]) / res
-        scores = map_coordinates(self.stack.field, [y.ravel(), x.ravel()], order=1, mode='constant',
-                                 cval=0.0).reshape(len(du), -1).mean(axis=1)
-        scores = np.maximum(scores, 1e-9)
+        poses = np.stack([u + du, v + dv, yaw + da], axis=1)
+        scores = np.maximum(field_means(self.stack.field, poses, pts[:, 0] / res, pts[:, 1] / res), 1e-9)
         w = np.exp(len(pts) * (np.log(scores) - np.log(scores.max())))
         w /= w.sum()
         offsets = np.stack([du * res, -dv * res, da], axis=1)      # grid frame: v points down
@@ -303,26 +342,21 @@ class BranchAndBoundMatcher(Matcher):
         rot[:2, :2] = [[cy, -sy], [sy, cy]]
         return rot @ cov @ rot.T
 
-    def mean_field(self, u, v, yaw, pts) -> float:
-        c, s = math.cos(yaw), math.sin(yaw)
-        res = self.map.resolution
-        x = u + (c * pts[:, 0] - s * pts[:, 1]) / res
-        y = v - (s * pts[:, 0] + c * pts[:, 1]) / res
-        return float(map_coordinates(self.stack.field, [y, x], order=1, mode='constant', cval=0.0).mean())
-
     def refine(self, u, v, yaw, pts):
         """Sub-cell pose maximizing the interpolated field (Nelder-Mead within a cell)."""
         res = self.map.resolution
-        scale = np.array([1.0, 1.0, res / max(float(np.hypot(pts[:, 0], pts[:, 1]).max()), res)])
+        px, py = pts[:, 0] / res, pts[:, 1] / res
+        yaw_unit = 1.0 / max(float(np.hypot(px, py).max()), 1.0)   # one cell at the farthest point
 
         def cost(z):
-            return -self.mean_field(u + z[0], v + z[1], yaw + z[2] * scale[2], pts)
+            pose = np.array([[u + z[0], v + z[1], yaw + z[2] * yaw_unit]])
+            return -field_means(self.stack.field, pose, px, py)[0]
 
         r = minimize(cost, np.zeros(3), method='Nelder-Mead',
                      options={'xatol': 0.02, 'fatol': 1e-5, 'initial_simplex': np.array(
                          [[0, 0, 0], [0.5, 0, 0], [0, 0.5, 0], [0, 0, 0.5]]), 'maxiter': 200})
         z = r.x if -r.fun >= -cost(np.zeros(3)) else np.zeros(3)
-        return u + z[0], v + z[1], yaw + z[2] * scale[2], -cost(z)
+        return u + z[0], v + z[1], yaw + z[2] * yaw_unit, -cost(z)
 
     def laser_pose(self, u: float, v: float, yaw: float) -> Rigid2D:
         """Laser at continuous pixel (u, v) with grid-frame heading yaw -> map frame."""

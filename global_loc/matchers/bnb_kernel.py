@@ -106,6 +106,67 @@ def search_step(grids, free_blocks, gid, du_all, dv_all, row_start, pad, map_w, 
 
 
 @njit(cache=True, nogil=True)
+def offset_tables(theta, px, py):
+    """Cell offsets (du, dv) of the points (px, py, laser frame, in cells) rotated by
+    each angle of theta: rows of the tables node_bound reads. dv: rows grow downwards."""
+    du = np.empty((len(theta), len(px)), np.int32)
+    dv = np.empty((len(theta), len(px)), np.int32)
+    for r in range(len(theta)):
+        c, s = math.cos(theta[r]), math.sin(theta[r])
+        for i in range(len(px)):
+            du[r, i] = round(c * px[i] - s * py[i])
+            dv[r, i] = round(-(s * px[i] + c * py[i]))
+    return du, dv
+
+
+@njit(cache=True, nogil=True)
+def field_means(field, poses, px, py):
+    """Per pose (u, v, yaw: continuous pixel position, grid-frame heading): the mean of
+    the field, bilinearly interpolated (zero outside the map), at the points (px, py,
+    laser frame, in cells). The refinement's and the covariance's score."""
+    height, width = field.shape
+    out = np.empty(poses.shape[0])
+    for k in range(poses.shape[0]):
+        c, s = math.cos(poses[k, 2]), math.sin(poses[k, 2])
+        total = 0.0
+        for i in range(len(px)):
+            x = poses[k, 0] + c * px[i] - s * py[i]
+            y = poses[k, 1] - (s * px[i] + c * py[i])
+            x0, y0 = math.floor(x), math.floor(y)
+            fx, fy = x - x0, y - y0
+            ix, iy = int(x0), int(y0)
+            for dy in range(2):
+                for dx in range(2):
+                    xx, yy = ix + dx, iy + dy
+                    if 0 <= xx < width and 0 <= yy < height:
+                        total += field[yy, xx] * (fx if dx else 1.0 - fx) * (fy if dy else 1.0 - fy)
+        out[k] = total / max(len(px), 1)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def see_through(occupied, poses, angles, lengths):
+    """Per pose (u, v, yaw: pixel position, grid-frame heading): how many of the rays
+    (laser-frame angles, lengths in cells) pass an occupied cell. Walks each ray in
+    half-cell steps from the laser and stops at the first occupied cell."""
+    height, width = occupied.shape
+    out = np.zeros(poses.shape[0], np.int64)
+    for k in range(poses.shape[0]):
+        for i in range(len(angles)):
+            c = math.cos(poses[k, 2] + angles[i])
+            s = math.sin(poses[k, 2] + angles[i])
+            t = 0.5
+            while t < lengths[i]:
+                x = int(round(poses[k, 0] + c * t))
+                y = int(round(poses[k, 1] - s * t))     # rows grow downwards
+                if 0 <= x < width and 0 <= y < height and occupied[y, x]:
+                    out[k] += 1
+                    break
+                t += 0.5
+    return out
+
+
+@njit(cache=True, nogil=True)
 def make_heap(top_nodes, level):
     """A heap of the top-level nodes, rows (u, v, a, bound)."""
     heap = List()      # typed: it stays compiled between calls (a Python list is re-checked each call)
@@ -127,3 +188,6 @@ def warm_up() -> None:
     node_bounds(grids, gid, du, du, row_start, 0, top[:, 0], top[:, 1], top[:, 2], 1)
     search_step(grids, free, gid, du, du, row_start, 0, 2, 2, 2, 0.9, make_heap(top, 1), 0, 10,
                 np.zeros(2, np.int64))
+    see_through(grids[0], np.zeros((1, 3)), np.zeros(1), np.ones(1))
+    offset_tables(np.zeros(1), np.zeros(1), np.zeros(1))
+    field_means(np.zeros((2, 2), np.float32), np.zeros((1, 3)), np.zeros(1), np.zeros(1))
