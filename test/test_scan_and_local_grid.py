@@ -15,6 +15,10 @@ def test_invalid_readings_are_dropped_and_counted():
     pts = scan_to_points(make_scan([1.0, np.nan, np.inf, 0.05, 10.0, -np.inf, 2.0]))
     assert len(pts.points) == 2
     assert pts.dropped == {'nan': 1, 'inf': 2, 'below_range_min': 1, 'at_or_above_range_max': 1}
+    # +inf and a reading at range_max saw nothing (free space along the beam); NaN, -inf
+    # ("too close", REP 117) and a reading below range_min say nothing about it.
+    angles = -math.pi / 2 + math.pi / 2 * np.array([2, 4])
+    assert pts.no_return_angles == pytest.approx(angles)
 
 
 def test_points_are_in_the_laser_frame_counter_clockwise_from_angle_min():
