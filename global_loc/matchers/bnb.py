@@ -24,11 +24,11 @@ Free space: the field only rewards end points, so a pose whose beams pass throug
 walls to reach them (a corridor matched 180 deg reversed, a twin room behind a closed
 door) can score as high as the truth. Each refined hypothesis is therefore also checked
 ray by ray (bnb_kernel.see_through): the fraction of beams, returns and no-returns, that
-cross an occupied cell before their end. The ranking score is the field score less that
-fraction beyond the least of all hypotheses (transient things in the map - people, doors
-- make every pose pay some on real maps). It can reorder the hypotheses, but a confident
-answer also needs a margin on the field score alone: the ray test decides between poses,
-it never vouches for one.
+cross an occupied cell before their end. The ranking score is the field score x (1 -
+that fraction). It can reorder the hypotheses, but a confident answer also needs a margin
+on the field score alone: the ray test decides between poses, it never vouches for one
+(transient things in the map - people, doors - make true poses fail it for some beams on
+real maps).
 """
 from __future__ import annotations
 
@@ -150,7 +150,7 @@ class BranchAndBoundMatcher(Matcher):
             return Verdict(False, 0.0, f'search incomplete: stopped after {opt.max_nodes} node expansions; '
                                        f'best of what was explored, see the hypotheses')
         best, others = candidates[0], candidates[1:]
-        fit = [c.score if c.explained is None else c.explained for c in candidates]
+        fit = [c.explained for c in candidates]     # refine_peaks sets it on every candidate
         # No other peak found means none scored above keep_ratio x best (in either score).
         second = others[0].score if others else opt.keep_ratio * best.score
         rival = max(fit[1:] + [opt.keep_ratio * max(fit)])
@@ -164,7 +164,7 @@ class BranchAndBoundMatcher(Matcher):
         if explained < 1.0 and explained < opt.min_confidence:
             return Verdict(False, conf, f'poor match: the map explains about {100 * fit[0]:.0f}% of the scan')
         if fit_margin < 0 and others:
-            rival_c = max(others, key=lambda c: c.score if c.explained is None else c.explained)
+            rival_c = max(others, key=lambda c: c.explained)
             return Verdict(False, conf, f'ambiguous: another place explains the scan as well or better, but '
                                         f'{100 * (rival_c.see_through or 0.0):.0f}% of its beams would pass through '
                                         f'walls ({100 * (best.see_through or 0.0):.0f}% for the best); '
@@ -292,7 +292,7 @@ class BranchAndBoundMatcher(Matcher):
             starts.append((float(u), float(v), g.yaw))
         refined = np.array([self.refine(u, v, yaw, pts) for u, v, yaw in starts]).reshape(-1, 4)
         through = self.see_through_fractions(refined[:, :3], points)
-        rank = refined[:, 3] * (1.0 - (through - through.min(initial=0.0)))
+        rank = refined[:, 3] * (1.0 - through)
         order = np.argsort(-rank, kind='stable')
         out = [Candidate(self.laser_pose(*refined[i, :3]), float(rank[i]), explained=float(refined[i, 3]),
                          see_through=float(through[i])) for i in order]
@@ -308,13 +308,15 @@ class BranchAndBoundMatcher(Matcher):
         short of its end point, a no-return beam over its whole range (up to max_range)."""
         opt = self.options
         res = self.map.resolution
+        if len(poses) == 0 or not points.beams:
+            return np.zeros(len(poses))
         ranges = np.hypot(points.points[:, 0], points.points[:, 1])
         near = ranges <= opt.max_range
         angles = np.concatenate([np.arctan2(points.points[near, 1], points.points[near, 0]),
                                  points.no_return_angles])
         lengths = np.concatenate([ranges[near] / res - opt.see_through_tolerance_cells,
                                   np.full(len(points.no_return_angles), min(points.range_max, opt.max_range) / res)])
-        if len(poses) == 0 or len(angles) == 0 or not points.beams:
+        if len(angles) == 0:
             return np.zeros(len(poses))
         crossed = see_through(self.stack.occupied, np.ascontiguousarray(poses, np.float64),
                               angles.astype(np.float64), lengths.astype(np.float64))
