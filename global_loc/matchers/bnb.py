@@ -68,12 +68,23 @@ class BranchAndBoundOptions:
 
 
 MARGINS = (0, 1, 2, 3, 5, 9, 17, 33)   # widenings (cells) for which grids are kept
+PLANE_SHIFT_FROM = 3                   # planes of level h > this are stored at 1 / 2^(h - this)
+                                       # resolution (see PrecomputationGridStack)
 
 
 class PrecomputationGridStack:
-    """Per map, built once: the likelihood field, max-pooled uint8 grids per level and
-    widening (one array, `grids[index[level, widening]]`), and per level whether a
-    block holds a free cell. Memory: `nbytes`."""
+    """Per map, built once: the likelihood field; per level and widening a uint8 plane
+    whose cell holds the field's maximum over the block starting there and the widening
+    around it (`grid_ids` picks one per point); per level, whether each block holds a
+    free cell. Memory: `nbytes`.
+
+    The search is bound by memory latency (a node reads ~200 scattered cells), so the
+    planes are kept small: a level-h plane (windows of 2^h cells and more) is stored at
+    1 / 2^shift[h] of the map's resolution, each stored cell the maximum over the
+    2^shift x 2^shift cells it stands for. That widens each window by under 2^shift
+    cells - a looser but still valid bound - and divides the memory the upper levels
+    read by 4^shift. All planes are one flat array (`flat`, plane k from offsets[k]),
+    read by the kernel as flat[offsets[k] + (y >> shift[h]) * plane_width[h] + (x >> shift[h])]."""
 
     def __init__(self, occupancy_map: OccupancyMap, options: BranchAndBoundOptions):
         self.options = options
@@ -85,25 +96,54 @@ class PrecomputationGridStack:
         top = options.levels - 1
         self.pad = (2 ** top) + 2 * int(self.margin(top)) + 2
         p = self.pad
-        base = cv2.copyMakeBorder(np.rint(self.field * 255).astype(np.uint8), p, p, p, p, cv2.BORDER_CONSTANT, value=0)
-        free = occupancy_map.free.astype(np.uint8)
-        free = cv2.copyMakeBorder(free, p, p, p, p, cv2.BORDER_CONSTANT, value=0)
+        self.shift = np.array([max(0, h - PLANE_SHIFT_FROM) for h in range(options.levels)], np.int64)
+        unit = 2 ** int(self.shift.max())
+        # padded so that every plane's size divides evenly
+        height, width = (-(-(n + 2 * p) // unit) * unit for n in occupied.shape)
+        self.height, self.width = height, width
+        base = np.zeros((height, width), np.uint8)
+        base[p:p + occupied.shape[0], p:p + occupied.shape[1]] = np.rint(self.field * 255).astype(np.uint8)
         self.index: dict[tuple[int, int], int] = {}
         for h in range(options.levels):
             for m in MARGINS:
                 self.index[h, m] = len(self.index)
                 if m >= self.margin(h):
                     break
-        self.grids = np.empty((len(self.index),) + base.shape, np.uint8)
-        self.free_blocks = np.empty((options.levels,) + free.shape, np.uint8)
+        planes, plane = [], np.empty_like(base)
         for (h, m), i in self.index.items():
-            width = 2 ** h + 2 * m
-            # dilate's window at (x, y) spans [x - anchor, x - anchor + width): the block and m around it
-            cv2.dilate(base, np.ones((width, width), np.uint8), dst=self.grids[i], anchor=(m, m))
+            k = 2 ** int(self.shift[h])
+            # dilate's window at (x, y) spans [x - anchor, x - anchor + size): the block and m
+            # around it, and the k - 1 cells after it that the stored cell (x, y) also stands for
+            size = 2 ** h + 2 * m + k - 1
+            cv2.dilate(base, np.ones((size, size), np.uint8), dst=plane, anchor=(m, m))
+            planes.append(plane[::k, ::k].flatten())     # a copy: plane is reused
+        self.plane_width = np.array([width >> int(s) for s in self.shift], np.int64)
+        self.offsets = np.cumsum([0] + [len(q) for q in planes[:-1]]).astype(np.int64)
+        self.flat = np.concatenate(planes)
+        # free_blocks: per level h, block (u >> h, v >> h) of the map holds a free cell
+        free = occupancy_map.free
+        self.free_offsets, self.free_width, blocks = [], [], []
         for h in range(options.levels):
-            size = 2 ** h
-            cv2.dilate(free, np.ones((size, size), np.uint8), dst=self.free_blocks[h], anchor=(0, 0))
-        self.nbytes = self.field.nbytes + self.grids.nbytes + self.free_blocks.nbytes + self.occupied.nbytes
+            k = 2 ** h
+            rows, cols = -(-free.shape[0] // k), -(-free.shape[1] // k)
+            padded = np.zeros((rows * k, cols * k), bool)
+            padded[:free.shape[0], :free.shape[1]] = free
+            self.free_offsets.append(sum(len(b) for b in blocks))
+            self.free_width.append(cols)
+            blocks.append(padded.reshape(rows, k, cols, k).any(axis=(1, 3)).astype(np.uint8).ravel())
+        self.free_blocks = np.concatenate(blocks)
+        self.free_offsets = np.array(self.free_offsets, np.int64)
+        self.free_width = np.array(self.free_width, np.int64)
+        self.nbytes = self.field.nbytes + self.flat.nbytes + self.free_blocks.nbytes + self.occupied.nbytes
+
+    def layout(self):
+        """What the kernel needs to find a cell: (shift, plane_width, pad, width, height)."""
+        return self.shift, self.plane_width, self.pad, self.width, self.height
+
+    def free_block(self, level: int, u, v):
+        """Whether the level's blocks starting at map cells (u, v) hold a free cell."""
+        return self.free_blocks[self.free_offsets[level] + (np.asarray(v) >> level) * self.free_width[level]
+                                + (np.asarray(u) >> level)] > 0
 
     @staticmethod
     def margin(level: int, range_fraction=1.0):
@@ -188,8 +228,8 @@ class BranchAndBoundMatcher(Matcher):
     # ---- scoring -------------------------------------------------------------------
     def tables(self, pts: np.ndarray, d0: float, n_angles: int):
         """What the kernel reads for this scan: per level h, the points' cell offsets at
-        the middle angle of each node's angles (rows row_start[h] + a >> h), and the grid
-        each point reads (grid_ids)."""
+        the middle angle of each node's angles (rows row_start[h] + a >> h), and where in
+        the flat grids the grid each point reads (grid_ids) starts."""
         res = self.map.resolution
         ranges = np.hypot(pts[:, 0], pts[:, 1])
         gid = self.stack.grid_ids(ranges, max(float(ranges.max()), 1e-9))
@@ -199,12 +239,12 @@ class BranchAndBoundMatcher(Matcher):
             size = 2 ** h
             thetas.append((np.arange(0, n_angles, size) + (size - 1) / 2.0) * d0)
         du, dv = offset_tables(np.concatenate(thetas), pts[:, 0] / res, pts[:, 1] / res)   # (rows, points)
-        return gid, du, dv, np.array(row_start, np.int64)
+        return (self.stack.offsets[gid], du, dv, np.array(row_start, np.int64)) + self.stack.layout()
 
     def bounds(self, level: int, tu, tv, ta, pts, d0) -> np.ndarray:
         """Bounds (level > 0) or exact scores (level 0) of nodes (tu, tv, ta), in [0, 1]."""
         n_angles = int(round(2 * math.pi / d0))
-        raw = node_bounds(self.stack.grids, *self.tables(pts, d0, n_angles), self.stack.pad, np.asarray(tu, np.int64),
+        raw = node_bounds(self.stack.flat, *self.tables(pts, d0, n_angles), np.asarray(tu, np.int64),
                           np.asarray(tv, np.int64), np.asarray(ta, np.int64), level)
         return raw / (255.0 * len(pts))
 
@@ -223,13 +263,12 @@ class BranchAndBoundMatcher(Matcher):
         gu, gv, ga = np.meshgrid(np.arange(0, self.map.width, step), np.arange(0, self.map.height, step),
                                  np.arange(0, n_angles, step), indexing='ij')
         tu, tv, ta = gu.ravel(), gv.ravel(), ga.ravel()
-        p = self.stack.pad
-        keep = self.stack.free_blocks[top][tv + p, tu + p] > 0
+        keep = self.stack.free_block(top, tu, tv)
         tu, tv, ta = tu[keep], tv[keep], ta[keep]
         if len(tu) == 0:
             return []
         tables = self.tables(pts, d0, n_angles)
-        b = node_bounds(self.stack.grids, *tables, p, tu, tv, ta, top)
+        b = node_bounds(self.stack.flat, *tables, tu, tv, ta, top)
         leaves, per_level, exact = self.search(np.stack([tu, tv, ta, b], axis=1).astype(np.int64), tables,
                                               n_angles, progress)
         scale = 255.0 * len(pts)
@@ -251,7 +290,8 @@ class BranchAndBoundMatcher(Matcher):
         per_level = np.zeros(opt.levels, np.int64)
         while True:
             budget = min(slice_expansions, opt.max_nodes - expanded)
-            best, n, done, leaves = search_step(self.stack.grids, self.stack.free_blocks, *tables, self.stack.pad,
+            best, n, done, leaves, heap = search_step(self.stack.flat, self.stack.free_blocks, self.stack.free_offsets,
+                                                      self.stack.free_width, *tables,
                                                 self.map.width, self.map.height, n_angles, opt.keep_ratio,
                                                 heap, best, budget, per_level)
             expanded += n

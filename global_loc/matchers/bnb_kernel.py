@@ -10,72 +10,178 @@ A node is (u, v, a, h): cells u .. u + 2^h - 1, v .. v + 2^h - 1 of the map, ang
 indices a .. a + 2^h - 1. Its bound is the sum over the scan's points of
 grids[gid[h, i]] at the point's cell, the point rotated by the node's middle angle
 (row row_start[h] + a >> h of the offset tables). Sums are integers (grids are uint8).
+
+The planes are one flat array (`flat`): point i at level h reads the plane starting at
+base[h, i], at (y >> shift[h]) * plane_width[h] + (x >> shift[h]) (x, y: the cell in the
+padded map; see PrecomputationGridStack), with unsigned bounds tests: numba's 3-d
+indexing with signed indices (wraparound) cost twice as much per point.
 """
 from __future__ import annotations
 
-import heapq
 import math
 
 import numpy as np
-from numba import njit
-from numba.typed import List
+from numba import njit, uint64
 
 
 @njit(cache=True, nogil=True)
-def node_bound(grids, gid, du_all, dv_all, row_start, pad, u, v, a, h, floor=0):
-    """The node's bound; or, as soon as the points left cannot lift it to `floor`, some
-    value below `floor` (the caller prunes it either way: most children are pruned, and
-    stopping early saves most of their cost)."""
+def node_bound(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, u, v, a, h):
+    """The node's bound."""
     row = row_start[h] + (a >> h)
-    _, height, width = grids.shape
+    du, dv, b = du_all[row], dv_all[row], base[h]
+    k, pw = shift[h], plane_width[h]
     bu, bv = u + pad, v + pad
-    n = du_all.shape[1]
     total = 0
-    for i in range(n):
-        x = bu + du_all[row, i]
-        y = bv + dv_all[row, i]
-        # Outside the padded grids every grid is zero.
-        if 0 <= x < width and 0 <= y < height:
-            total += grids[gid[h, i], y, x]
-        if (i & 7) == 7 and total + 255 * (n - 1 - i) < floor:
+    for i in range(du.shape[0]):
+        x = bu + du[i]
+        y = bv + dv[i]
+        # Outside the padded grids every grid is zero (unsigned: also catches x < 0).
+        if uint64(x) < uint64(width) and uint64(y) < uint64(height):
+            total += flat[uint64(b[i] + (y >> k) * pw + (x >> k))]
+    return total
+
+
+@njit(cache=True, nogil=True)
+def point_values(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, u, v, a, h, out):
+    """Each point's term of the node's bound, into out."""
+    row = row_start[h] + (a >> h)
+    du, dv, b = du_all[row], dv_all[row], base[h]
+    k, pw = shift[h], plane_width[h]
+    bu, bv = u + pad, v + pad
+    for i in range(du.shape[0]):
+        x = bu + du[i]
+        y = bv + dv[i]
+        out[i] = flat[uint64(b[i] + (y >> k) * pw + (x >> k))] if uint64(x) < uint64(width) and uint64(y) < uint64(height) else 0
+
+
+@njit(cache=True, nogil=True)
+def child_bound(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, u, v, a, h, parent, parent_rest, floor):
+    """A child's bound, each point's term capped by its parent's (parent[i]): every leaf
+    under the child is under the parent, whose term bounds the leaf's for each point,
+    so the capped sum is still a bound, and a tighter one. Capped terms never exceed the
+    parent's, so as soon as the sum so far plus the parent's terms for the points left
+    (parent_rest[i + 1]) is below `floor`, the child is pruned: the value returned is
+    then below `floor` too. Most children are pruned, most of them after a few points."""
+    row = row_start[h] + (a >> h)
+    du, dv, b = du_all[row], dv_all[row], base[h]
+    k, pw = shift[h], plane_width[h]
+    bu, bv = u + pad, v + pad
+    total = 0
+    for i in range(du.shape[0]):
+        x = bu + du[i]
+        y = bv + dv[i]
+        if uint64(x) < uint64(width) and uint64(y) < uint64(height):
+            total += min(flat[uint64(b[i] + (y >> k) * pw + (x >> k))], parent[i])
+        if total + parent_rest[i + 1] < floor:
             return total
     return total
 
 
 @njit(cache=True, nogil=True)
-def node_bounds(grids, gid, du_all, dv_all, row_start, pad, tu, tv, ta, h):
+def node_bounds(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, tu, tv, ta, h):
     out = np.empty(len(tu), np.int64)
     for k in range(len(tu)):
-        out[k] = node_bound(grids, gid, du_all, dv_all, row_start, pad, tu[k], tv[k], ta[k], h)
+        out[k] = node_bound(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, tu[k], tv[k], ta[k], h)
     return out
 
 
+# The pending nodes: a binary max-heap in arrays. heapq on a numba typed List costs
+# ~1.5 us per push or pop (every item access is a call into the list's C code), which
+# was ~40% of a search; these take ~0.1 us. keys[k] = bound x 8 + 7 - level: the highest
+# bound first, the deeper node first among equal bounds (reaching leaves sooner raises
+# the pruning threshold sooner). nodes[k] = (level, u, v, a). size[0]: the heap's size.
 @njit(cache=True, nogil=True)
-def search_step(grids, free_blocks, gid, du_all, dv_all, row_start, pad, map_w, map_h, n_angles, keep,
-                heap, best, budget, per_level):
+def heap_push(keys, nodes, size, key, h, u, v, a):
+    """Push a node; returns (keys, nodes), grown when full."""
+    n = size[0]
+    if n == keys.shape[0]:
+        grown_keys = np.empty(2 * n + 16, np.int64)
+        grown_keys[:n] = keys
+        grown_nodes = np.empty((2 * n + 16, 4), np.int64)
+        grown_nodes[:n] = nodes
+        keys, nodes = grown_keys, grown_nodes
+    i = n
+    while i > 0:
+        up = (i - 1) >> 1
+        if keys[up] >= key:
+            break
+        keys[i] = keys[up]
+        nodes[i] = nodes[up]
+        i = up
+    keys[i] = key
+    nodes[i, 0], nodes[i, 1], nodes[i, 2], nodes[i, 3] = h, u, v, a
+    size[0] = n + 1
+    return keys, nodes
+
+
+@njit(cache=True, nogil=True)
+def heap_pop(keys, nodes, size):
+    """Remove the top node; returns (key, level, u, v, a)."""
+    top_key, h, u, v, a = keys[0], nodes[0, 0], nodes[0, 1], nodes[0, 2], nodes[0, 3]
+    n = size[0] - 1
+    size[0] = n
+    if n > 0:
+        key = keys[n]
+        i = 0
+        while True:
+            child = 2 * i + 1
+            if child >= n:
+                break
+            if child + 1 < n and keys[child + 1] > keys[child]:
+                child += 1
+            if keys[child] <= key:
+                break
+            keys[i] = keys[child]
+            nodes[i] = nodes[child]
+            i = child
+        keys[i] = key
+        nodes[i] = nodes[n]
+    return top_key, h, u, v, a
+
+
+@njit(cache=True, nogil=True)
+def make_heap(top_nodes, level):
+    """A heap of the top-level nodes, rows (u, v, a, bound): (keys, nodes, size)."""
+    n = top_nodes.shape[0]
+    keys, nodes, size = np.empty(n + 16, np.int64), np.empty((n + 16, 4), np.int64), np.zeros(1, np.int64)
+    for k in range(n):
+        keys, nodes = heap_push(keys, nodes, size, top_nodes[k, 3] * 8 + 7 - level, level,
+                                top_nodes[k, 0], top_nodes[k, 1], top_nodes[k, 2])
+    return keys, nodes, size
+
+
+@njit(cache=True, nogil=True)
+def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_all, row_start, shift, plane_width,
+                pad, width, height, map_w, map_h, n_angles, keep, heap, best, budget, per_level):
     """Resume the best-first search for at most `budget` expansions.
 
-    heap: pending nodes as (-bound, level, u, v, a) (heapq order: highest bound first,
-    the deeper node first among equal bounds). Best first expands no node whose bound
+    heap: the pending nodes, (keys, nodes, size) as make_heap returns them. Best first expands no node whose bound
     is below the best leaf, so it expands the fewest nodes any search with these
     bounds can (a depth-first walk wanders through whole subtrees under a low early
     threshold). Every node whose bound reaches keep x best is expanded; the search is
     over when the top of the heap is below that. Leaves (level 0, exact scores)
     reaching keep x best when scored are returned; the caller prunes them by the final
     threshold. Counts expansions per level into per_level.
-    Returns (best, expansions, done, leaves (m, 4): u, v, a, score).
+    Returns (best, expansions, done, leaves (m, 4): u, v, a, score, heap).
     """
+    keys, nodes, size = heap
     leaves = np.empty((64, 4), np.int64)
     n_leaves = 0
+    n_points = du_all.shape[1]
+    parent = np.empty(n_points, np.int64)
+    parent_rest = np.zeros(n_points + 1, np.int64)     # parent_rest[i]: sum of parent[i:]
     expanded = 0
     done = False
     while expanded < budget:
-        if len(heap) == 0 or -heap[0][0] < keep * best:
+        if size[0] == 0 or (keys[0] >> 3) < keep * best:
             done = True
             break
-        neg_b, h, u, v, a = heapq.heappop(heap)
+        _, h, u, v, a = heap_pop(keys, nodes, size)
         expanded += 1
         per_level[h] += 1
+        point_values(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, u, v, a, h, parent)
+        for i in range(n_points - 1, -1, -1):
+            parent_rest[i] = parent_rest[i + 1] + parent[i]
         half = 1 << (h - 1)
         for c in range(8):     # the 4 quarter blocks x the 2 halves of the angles
             cu = u + (c & 1) * half
@@ -83,10 +189,10 @@ def search_step(grids, free_blocks, gid, du_all, dv_all, row_start, pad, map_w, 
             ca = a + ((c >> 2) & 1) * half
             if cu >= map_w or cv >= map_h or ca >= n_angles:
                 continue
-            if free_blocks[h - 1, cv + pad, cu + pad] == 0:
+            if free_blocks[free_offsets[h - 1] + (cv >> (h - 1)) * free_width[h - 1] + (cu >> (h - 1))] == 0:
                 continue
-            cb = node_bound(grids, gid, du_all, dv_all, row_start, pad, cu, cv, ca, h - 1,
-                            int(math.ceil(keep * best)))
+            cb = child_bound(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, cu, cv, ca, h - 1,
+                             parent, parent_rest, int(math.ceil(keep * best)))
             if h == 1:      # a leaf: its exact score
                 if cb > best:
                     best = cb
@@ -101,8 +207,8 @@ def search_step(grids, free_blocks, gid, du_all, dv_all, row_start, pad, map_w, 
                     leaves[n_leaves, 3] = cb
                     n_leaves += 1
             elif cb >= keep * best:
-                heapq.heappush(heap, (-cb, h - 1, cu, cv, ca))
-    return best, expanded, done, leaves[:n_leaves]
+                keys, nodes = heap_push(keys, nodes, size, cb * 8 + 7 - (h - 1), h - 1, cu, cv, ca)
+    return best, expanded, done, leaves[:n_leaves], (keys, nodes, size)
 
 
 @njit(cache=True, nogil=True)
@@ -166,27 +272,20 @@ def see_through(occupied, poses, angles, lengths):
     return out
 
 
-@njit(cache=True, nogil=True)
-def make_heap(top_nodes, level):
-    """A heap of the top-level nodes, rows (u, v, a, bound)."""
-    heap = List()      # typed: it stays compiled between calls (a Python list is re-checked each call)
-    for k in range(top_nodes.shape[0]):
-        heap.append((-top_nodes[k, 3], level, top_nodes[k, 0], top_nodes[k, 1], top_nodes[k, 2]))
-    heapq.heapify(heap)
-    return heap
-
-
 def warm_up() -> None:
     """Compile (or load from numba's cache) every kernel on a tiny problem, so a server
     pays it at start-up rather than in its first goal."""
     grids = np.zeros((1, 4, 4), np.uint8)
     free = np.ones((2, 4, 4), np.uint8)
-    gid = np.zeros((2, 1), np.int64)
+    base = np.zeros((2, 1), np.int64)
     du = np.zeros((3, 1), np.int32)
     row_start = np.array([0, 2], np.int64)
     top = np.zeros((1, 4), np.int64)
-    node_bounds(grids, gid, du, du, row_start, 0, top[:, 0], top[:, 1], top[:, 2], 1)
-    search_step(grids, free, gid, du, du, row_start, 0, 2, 2, 2, 0.9, make_heap(top, 1), 0, 10,
+    zeros = np.zeros(2, np.int64)
+    widths = np.full(2, 4, np.int64)
+    node_bounds(grids.ravel(), base, du, du, row_start, zeros, widths, 0, 4, 4, top[:, 0], top[:, 1], top[:, 2], 1)
+    search_step(grids.ravel(), free.ravel(), zeros, widths, base, du, du, row_start, zeros, widths, 0, 4, 4,
+                2, 2, 2, 0.9, make_heap(top, 1), 0, 10,
                 np.zeros(2, np.int64))
     see_through(grids[0], np.zeros((1, 3)), np.zeros(1), np.ones(1))
     offset_tables(np.zeros(1), np.zeros(1), np.zeros(1))
