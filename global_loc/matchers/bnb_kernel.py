@@ -24,38 +24,27 @@ import numpy as np
 from numba import njit, uint64
 
 
-@njit(cache=True, nogil=True)
-def node_bound(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, u, v, a, h):
-    """The node's bound."""
-    row = row_start[h] + (a >> h)
-    du, dv, b = du_all[row], dv_all[row], base[h]
-    k, pw = shift[h], plane_width[h]
-    bu, bv = u + pad, v + pad
-    total = 0
-    for i in range(du.shape[0]):
-        x = bu + du[i]
-        y = bv + dv[i]
-        # Outside the padded grids every grid is zero (unsigned: also catches x < 0).
-        if uint64(x) < uint64(width) and uint64(y) < uint64(height):
-            total += flat[uint64(b[i] + (y >> k) * pw + (x >> k))]
-    return total
+@njit(cache=True, nogil=True, inline='always')
+def plane_value(flat, start, shift, plane_width, width, height, x, y):
+    """The value of the plane starting at flat[start] at cell (x, y) of the padded map;
+    0 outside it (unsigned comparisons also catch x, y < 0)."""
+    if uint64(x) < uint64(width) and uint64(y) < uint64(height):
+        return np.int64(flat[uint64(start + (y >> shift) * plane_width + (x >> shift))])
+    return np.int64(0)
 
 
 @njit(cache=True, nogil=True)
 def point_values(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, u, v, a, h, out):
     """Each point's term of the node's bound, into out."""
     row = row_start[h] + (a >> h)
-    du, dv, b = du_all[row], dv_all[row], base[h]
-    k, pw = shift[h], plane_width[h]
-    bu, bv = u + pad, v + pad
-    for i in range(du.shape[0]):
-        x = bu + du[i]
-        y = bv + dv[i]
-        out[i] = flat[uint64(b[i] + (y >> k) * pw + (x >> k))] if uint64(x) < uint64(width) and uint64(y) < uint64(height) else 0
+    for i in range(du_all.shape[1]):
+        out[i] = plane_value(flat, base[h, i], shift[h], plane_width[h], width, height,
+                             u + pad + du_all[row, i], v + pad + dv_all[row, i])
 
 
 @njit(cache=True, nogil=True)
-def child_bound(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, u, v, a, h, parent, parent_rest, floor):
+def child_bound(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, u, v, a, h, parent,
+                parent_rest, floor):
     """A child's bound, each point's term capped by its parent's (parent[i]): every leaf
     under the child is under the parent, whose term bounds the leaf's for each point,
     so the capped sum is still a bound, and a tighter one. Capped terms never exceed the
@@ -63,15 +52,10 @@ def child_bound(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, 
     (parent_rest[i + 1]) is below `floor`, the child is pruned: the value returned is
     then below `floor` too. Most children are pruned, most of them after a few points."""
     row = row_start[h] + (a >> h)
-    du, dv, b = du_all[row], dv_all[row], base[h]
-    k, pw = shift[h], plane_width[h]
-    bu, bv = u + pad, v + pad
     total = 0
-    for i in range(du.shape[0]):
-        x = bu + du[i]
-        y = bv + dv[i]
-        if uint64(x) < uint64(width) and uint64(y) < uint64(height):
-            total += min(flat[uint64(b[i] + (y >> k) * pw + (x >> k))], parent[i])
+    for i in range(du_all.shape[1]):
+        total += min(plane_value(flat, base[h, i], shift[h], plane_width[h], width, height,
+                                 u + pad + du_all[row, i], v + pad + dv_all[row, i]), parent[i])
         if total + parent_rest[i + 1] < floor:
             return total
     return total
@@ -79,9 +63,13 @@ def child_bound(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, 
 
 @njit(cache=True, nogil=True)
 def node_bounds(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, tu, tv, ta, h):
+    """The bounds of nodes (tu, tv, ta) at level h: the sums of their points' terms."""
     out = np.empty(len(tu), np.int64)
+    terms = np.empty(du_all.shape[1], np.int64)
     for k in range(len(tu)):
-        out[k] = node_bound(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, tu[k], tv[k], ta[k], h)
+        point_values(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height,
+                     tu[k], tv[k], ta[k], h, terms)
+        out[k] = terms.sum()
     return out
 
 
