@@ -66,6 +66,12 @@ def test_bounds_are_never_below_the_leaves_under_them():
             assert leaves.max() <= bound[i] + 1e-12
 
 
+@pytest.mark.parametrize('levels', [0, 8])
+def test_levels_beyond_what_the_planes_cover_are_a_clear_error(levels):
+    with pytest.raises(ValueError, match='bnb levels must be 1 .. 7'):
+        BranchAndBoundMatcher(small_room(), BranchAndBoundOptions(levels=levels))
+
+
 def test_bnb_localizes_raycast_scans_on_the_office(office_map):
     localizer = Localizer(office_map)
     rng = np.random.default_rng(2026)

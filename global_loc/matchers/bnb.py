@@ -88,12 +88,17 @@ class PrecomputationGridStack:
 
     def __init__(self, occupancy_map: OccupancyMap, options: BranchAndBoundOptions):
         self.options = options
+        top = options.levels - 1
+        # The widest plane must cover the top level's heading spread (else its bounds would
+        # not be bounds), and the kernel's heap keys hold the level in 3 bits.
+        most = max(n for n in range(1, 9) if self.margin(n - 1) <= MARGINS[-1])
+        if not 1 <= options.levels <= most:
+            raise ValueError(f'bnb levels must be 1 .. {most}, got {options.levels}')
         occupied = occupancy_map.occupied
         self.occupied = occupied.astype(np.uint8)     # for the free-space check
         dist = cv2.distanceTransform((~occupied).astype(np.uint8), cv2.DIST_L2, 5) if occupied.any() \
             else np.full(occupied.shape, 1e6, np.float32)
         self.field = np.exp(-(dist.astype(np.float32) ** 2) / (2.0 * options.sigma_cells ** 2))
-        top = options.levels - 1
         self.pad = (2 ** top) + 2 * int(self.margin(top)) + 2
         p = self.pad
         self.shift = np.array([max(0, h - PLANE_SHIFT_FROM) for h in range(options.levels)], np.int64)

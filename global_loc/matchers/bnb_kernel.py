@@ -7,9 +7,10 @@ tables, which grid each point reads) is prepared in bnb.py. Compiled on first us
 cached on disk (numba cache=True), so only a machine's first run pays the ~15 s.
 
 A node is (u, v, a, h): cells u .. u + 2^h - 1, v .. v + 2^h - 1 of the map, angle
-indices a .. a + 2^h - 1. Its bound is the sum over the scan's points of
-grids[gid[h, i]] at the point's cell, the point rotated by the node's middle angle
-(row row_start[h] + a >> h of the offset tables). Sums are integers (grids are uint8).
+indices a .. a + 2^h - 1. Its bound is the sum over the scan's points of the point's
+plane (the one widened for its range, bnb.PrecomputationGridStack.grid_ids) at the
+point's cell, the point rotated by the node's middle angle (row row_start[h] + a >> h
+of the offset tables). Sums are integers (planes are uint8).
 
 The planes are one flat array (`flat`): point i at level h reads the plane starting at
 base[h, i], at (y >> shift[h]) * plane_width[h] + (x >> shift[h]) (x, y: the cell in the
@@ -78,6 +79,12 @@ def node_bounds(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, 
 # was ~40% of a search; these take ~0.1 us. keys[k] = bound x 8 + 7 - level: the highest
 # bound first, the deeper node first among equal bounds (reaching leaves sooner raises
 # the pruning threshold sooner). nodes[k] = (level, u, v, a). size[0]: the heap's size.
+@njit(cache=True, nogil=True, inline='always')
+def heap_key(bound, level):
+    """A node's key; key >> 3 is its bound (levels < 8)."""
+    return bound * 8 + 7 - level
+
+
 @njit(cache=True, nogil=True)
 def heap_push(keys, nodes, size, key, h, u, v, a):
     """Push a node; returns (keys, nodes), grown when full."""
@@ -133,7 +140,7 @@ def make_heap(top_nodes, level):
     n = top_nodes.shape[0]
     keys, nodes, size = np.empty(n + 16, np.int64), np.empty((n + 16, 4), np.int64), np.zeros(1, np.int64)
     for k in range(n):
-        keys, nodes = heap_push(keys, nodes, size, top_nodes[k, 3] * 8 + 7 - level, level,
+        keys, nodes = heap_push(keys, nodes, size, heap_key(top_nodes[k, 3], level), level,
                                 top_nodes[k, 0], top_nodes[k, 1], top_nodes[k, 2])
     return keys, nodes, size
 
@@ -143,9 +150,9 @@ def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_al
                 pad, width, height, map_w, map_h, n_angles, keep, heap, best, budget, per_level):
     """Resume the best-first search for at most `budget` expansions.
 
-    heap: the pending nodes, (keys, nodes, size) as make_heap returns them. Best first expands no node whose bound
-    is below the best leaf, so it expands the fewest nodes any search with these
-    bounds can (a depth-first walk wanders through whole subtrees under a low early
+    heap: the pending nodes, (keys, nodes, size) as make_heap returns them. Best first
+    expands no node whose bound is below the best leaf, so it expands the fewest nodes
+    any search with these bounds can (a depth-first walk wanders through whole subtrees under a low early
     threshold). Every node whose bound reaches keep x best is expanded; the search is
     over when the top of the heap is below that. Leaves (level 0, exact scores)
     reaching keep x best when scored are returned; the caller prunes them by the final
@@ -161,7 +168,7 @@ def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_al
     expanded = 0
     done = False
     while expanded < budget:
-        if size[0] == 0 or (keys[0] >> 3) < keep * best:
+        if size[0] == 0 or (keys[0] >> 3) < keep * best:      # the top node's bound (heap_key)
             done = True
             break
         _, h, u, v, a = heap_pop(keys, nodes, size)
@@ -179,8 +186,8 @@ def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_al
                 continue
             if free_blocks[free_offsets[h - 1] + (cv >> (h - 1)) * free_width[h - 1] + (cu >> (h - 1))] == 0:
                 continue
-            cb = child_bound(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, cu, cv, ca, h - 1,
-                             parent, parent_rest, int(math.ceil(keep * best)))
+            cb = child_bound(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height,
+                             cu, cv, ca, h - 1, parent, parent_rest, int(math.ceil(keep * best)))
             if h == 1:      # a leaf: its exact score
                 if cb > best:
                     best = cb
@@ -195,7 +202,7 @@ def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_al
                     leaves[n_leaves, 3] = cb
                     n_leaves += 1
             elif cb >= keep * best:
-                keys, nodes = heap_push(keys, nodes, size, cb * 8 + 7 - (h - 1), h - 1, cu, cv, ca)
+                keys, nodes = heap_push(keys, nodes, size, heap_key(cb, h - 1), h - 1, cu, cv, ca)
     return best, expanded, done, leaves[:n_leaves], (keys, nodes, size)
 
 
