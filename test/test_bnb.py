@@ -1,6 +1,8 @@
 """The branch-and-bound matcher: exact against brute force, and right on ray-cast scans."""
+import functools
 import math
 
+import cv2
 import numpy as np
 import pytest
 
@@ -29,16 +31,30 @@ def brute_force_leaves(matcher, pts, d0, n_angles):
     return np.concatenate([matcher.bounds(0, cols, rows, np.full(len(cols), a), pts, d0) for a in range(n_angles)])
 
 
-@pytest.mark.parametrize('seed', [1, 2, 3])
-def test_branch_and_bound_finds_the_brute_force_maximum_and_every_pose_near_it(seed):
+@pytest.fixture
+def opencv_threads():
+    """Sets cv2.setNumThreads (which the search's thread count follows) for one test."""
+    before = cv2.getNumThreads()
+    yield cv2.setNumThreads
+    cv2.setNumThreads(before)
+
+
+@pytest.mark.parametrize('seed, threads, slice_expansions', [(1, 1, 20000), (2, 1, 20000), (3, 1, 20000),
+                                                             (1, 2, 20000), (2, 3, 7), (3, 2, 5)])
+def test_branch_and_bound_finds_the_brute_force_maximum_and_every_pose_near_it(seed, threads, slice_expansions,
+                                                                                opencv_threads):
+    """One thread or several (short slices: threads run out of nodes and take half of
+    another's heap, many times), the same exact result."""
+    opencv_threads(threads)
     m = small_room()
     rng = np.random.default_rng(seed)
     truth = sample_free_poses(m, 1, rng, clearance=0.3)[0]
     scan = simulate_scan(m, truth, 270.0, 271, 4.0, noise_std=0.01, rng=rng)
     matcher = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=4))
+    matcher.search = functools.partial(matcher.search, slice_expansions=slice_expansions)
     matcher.match(scan_to_points(scan), MatchOptions())
     search = matcher.last_search
-    assert search['exact']
+    assert search['exact'] and search['threads'] == threads
     pts = matcher.prepare(scan_to_points(scan).points)
     scores = brute_force_leaves(matcher, pts, 2 * math.pi / search['angles'], search['angles'])
     assert search['best_leaf'] == pytest.approx(scores.max(), abs=1e-12)

@@ -113,7 +113,8 @@ def main(argv=None) -> int:
     # spawn, not fork: a child forked after OpenCV's thread pool started (the parent's map
     # building) can deadlock in its first OpenCV call (seen: cv2.setNumThreads in _worker_init).
     ctx = mp.get_context('spawn')
-    with ctx.Pool(args.jobs, initializer=worker_init, initargs=(maps,)) as pool:
+    threads = max(1, (os.cpu_count() or 1) // args.jobs)     # per worker: its share of the cores
+    with ctx.Pool(args.jobs, initializer=worker_init, initargs=(maps, threads)) as pool:
         for row in tqdm(pool.imap_unordered(run_job, jobs, chunksize=2), total=len(jobs), desc='localizations',
                         file=sys.stderr):
             rows.append(row)
@@ -121,7 +122,7 @@ def main(argv=None) -> int:
         for row in rows:
             f.write(json.dumps(row) + '\n')
     meta = {'machine': machine, 'command': 'python -m global_loc.bench ' + ' '.join(argv or sys.argv[1:]),
-            'jobs': args.jobs, 'wall_time_s': round(time.time() - t0, 1), 'quick': args.quick,
+            'jobs': args.jobs, 'threads': threads, 'wall_time_s': round(time.time() - t0, 1), 'quick': args.quick,
             'maps': {n: f'{m.width} x {m.height} cells at {m.resolution} m' for n, m in maps.items() if '/' not in n},
             **notes}
     write_report(rows, meta, out, {n: m for n, m in maps.items()}, trials)

@@ -73,7 +73,8 @@ def write_report(rows, meta, out, maps, trials) -> None:
     by_suite = group(rows, lambda r: r['suite'])
     md = ['# global_loc benchmark' + (' (quick)' if meta['quick'] else ''), '',
           f'Command: `{meta["command"]}` — {len(rows)} localizations in {meta["wall_time_s"]} s with '
-          f'{meta["jobs"]} worker processes (OpenCV single-threaded in each).', '',
+          f'{meta["jobs"]} worker process(es), {meta.get("threads", 1)} thread(s) each (cv2.setNumThreads: '
+          f'OpenCV\'s threads and bnb\'s search threads).', '',
           '| machine | |', '|---|---|'] + [f'| {k} | {v} |' for k, v in meta['machine'].items()] + ['']
     md += ['Success: position error < 0.2 m and heading error < 5° (the thesis criterion), also 0.5 m / 10°. '
            '"Marked success but wrong": the result says `success` but misses 0.2 m / 5° (share of all trials). '

@@ -45,7 +45,9 @@ def _ok(err, d, a):
     return bool(err[0] < d and err[1] < a)
 
 
-def worker_init(maps):
+def worker_init(maps, threads):
+    """threads: each worker's share of the cores. OpenCV's threads and bnb's search
+    threads follow cv2.setNumThreads, so every method gets the same share."""
     import cv2
-    cv2.setNumThreads(1)   # the workers share the cores; OpenCV's own threads would fight them
+    cv2.setNumThreads(threads)
     _MAPS.update(maps)

@@ -33,6 +33,7 @@ real maps).
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -42,7 +43,8 @@ from scipy.optimize import minimize
 from ..map_io import OccupancyMap
 from ..transform import Rigid2D
 from .base import Candidate, Matcher, Verdict, distinct
-from .bnb_kernel import field_means, make_heap, node_bounds, offset_tables, search_step, see_through, warm_up
+from .bnb_kernel import (PAD, field_means, make_heap, node_bounds, offset_tables, search_step, see_through, split_heap,
+                         warm_up)
 
 
 @dataclass
@@ -179,6 +181,7 @@ class BranchAndBoundMatcher(Matcher):
         super().__init__(occupancy_map)
         self.options = options or BranchAndBoundOptions()
         self.last_search: dict = {}
+        self._executor = None
         self.stack = PrecomputationGridStack(occupancy_map, self.options)
         warm_up()
 
@@ -254,6 +257,18 @@ class BranchAndBoundMatcher(Matcher):
         return raw / (255.0 * len(pts))
 
     # ---- search --------------------------------------------------------------------
+    @staticmethod
+    def threads() -> int:
+        """Search threads: as many as OpenCV may use (cv2.getNumThreads(), by default one
+        per core), so one setting - cv2.setNumThreads - governs every matcher; the
+        benchmark's worker processes set it to 1."""
+        return max(1, cv2.getNumThreads())
+
+    def _pool(self, threads: int) -> ThreadPoolExecutor:
+        if self._executor is None or self._executor._max_workers != threads:
+            self._executor = ThreadPoolExecutor(threads, thread_name_prefix='bnb')
+        return self._executor
+
     def match(self, points, options, progress=None):
         opt = self.options
         pts = self.prepare(points.points)
@@ -280,6 +295,7 @@ class BranchAndBoundMatcher(Matcher):
         lu, lv, la, ls = leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, 3] / scale
         self.last_search = {'exact': exact, 'angles': n_angles, 'points': len(pts), 'leaves': len(ls),
                             'expansions': int(per_level.sum()), 'top_nodes': len(tu), 'per_level': per_level.tolist(),
+                            'threads': self.threads(),
                             'best_leaf': float(ls.max()) if len(ls) else 0.0}
         return self.refine_peaks(lu, lv, la, ls, pts, d0, points, progress)
 
@@ -288,25 +304,49 @@ class BranchAndBoundMatcher(Matcher):
         progress is reported and a cancel is seen between them. Every node whose bound
         reaches keep_ratio x the best leaf is expanded; returns the leaves scoring that
         high (rows u, v, angle index, raw score), the expansions per level, and whether
-        the search was exhaustive (False when max_nodes stopped it)."""
+        the search was exhaustive (False when max_nodes stopped it).
+
+        On several cores the top nodes are dealt to one heap per thread (the kernel
+        releases the GIL); the threads share the best leaf found so far, so each prunes
+        by the best any has found. A thread whose heap runs out takes half of the
+        fullest one. The result does not depend on the threads: every node reaching
+        keep_ratio x the final best is expanded whatever the order."""
         opt = self.options
-        heap = make_heap(top_nodes, opt.levels - 1)
-        best, expanded, found = 0, 0, []
-        per_level = np.zeros(opt.levels, np.int64)
+        threads = self.threads()
+        order = np.argsort(-top_nodes[:, 3], kind='stable')     # deal the best nodes evenly
+        heaps = [make_heap(top_nodes[order[k::threads]], opt.levels - 1) for k in range(threads)]
+        shared_best = np.zeros(PAD, np.int64)
+        per_level = [np.zeros(max(opt.levels, PAD), np.int64) for _ in heaps]   # PAD: see bnb_kernel
+        expanded, found, done = 0, [], [False] * threads
+
+        def run(k, budget):
+            best, n, done[k], leaves, heaps[k] = search_step(
+                self.stack.flat, self.stack.free_blocks, self.stack.free_offsets, self.stack.free_width, *tables,
+                self.map.width, self.map.height, n_angles, opt.keep_ratio, heaps[k], int(shared_best[0]),
+                shared_best, budget, per_level[k])
+            return n, leaves
+
         while True:
-            budget = min(slice_expansions, opt.max_nodes - expanded)
-            best, n, done, leaves, heap = search_step(self.stack.flat, self.stack.free_blocks, self.stack.free_offsets,
-                                                      self.stack.free_width, *tables,
-                                                self.map.width, self.map.height, n_angles, opt.keep_ratio,
-                                                heap, best, budget, per_level)
-            expanded += n
-            found.append(leaves)
-            if done or expanded >= opt.max_nodes:
+            budget = max(1, min(slice_expansions, opt.max_nodes - expanded) // threads)
+            if threads == 1:
+                results = [run(0, budget)]
+            else:
+                results = list(self._pool(threads).map(run, range(threads), [budget] * threads))
+            expanded += sum(n for n, _ in results)
+            found.extend(leaves for _, leaves in results)
+            if all(done) or expanded >= opt.max_nodes:
                 break
+            for k in range(threads):      # an idle thread takes half of the fullest heap
+                if done[k]:
+                    j = max(range(threads), key=lambda i: heaps[i][2][0])
+                    if heaps[j][2][0] > 1:
+                        heaps[k], heaps[j] = split_heap(*heaps[j])
+                        done[k] = done[j] = False
             if progress:   # the server's progress callback raises Cancelled on a cancel request
-                progress(min(0.95, expanded / opt.max_nodes), best / (255.0 * tables[1].shape[1]))
+                progress(min(0.95, expanded / opt.max_nodes), shared_best[0] / (255.0 * tables[1].shape[1]))
         leaves = np.concatenate(found)
-        return leaves[leaves[:, 3] >= opt.keep_ratio * best], per_level, bool(done)
+        return (leaves[leaves[:, 3] >= opt.keep_ratio * shared_best[0]], np.sum(per_level, axis=0)[:opt.levels],
+                all(done))
 
     # ---- peaks and refinement ----------------------------------------------------
     def bin_maxima(self, tu, tv, ta, scores, d0, limit: int = 512) -> np.ndarray:

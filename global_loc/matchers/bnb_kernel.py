@@ -74,6 +74,12 @@ def node_bounds(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, 
     return out
 
 
+# Counters that one thread writes at every node (a heap's size, expansions per level) are
+# PAD int64s long, only the first few used: two threads' counters in one 64-byte cache
+# line would make each write wait for the other core (false sharing; measured: each
+# thread's expansions took twice as long).
+PAD = 16
+
 # The pending nodes: a binary max-heap in arrays. heapq on a numba typed List costs
 # ~1.5 us per push or pop (every item access is a call into the list's C code), which
 # was ~40% of a search; these take ~0.1 us. keys[k] = bound x 8 + 7 - level: the highest
@@ -138,7 +144,7 @@ def heap_pop(keys, nodes, size):
 def make_heap(top_nodes, level):
     """A heap of the top-level nodes, rows (u, v, a, bound): (keys, nodes, size)."""
     n = top_nodes.shape[0]
-    keys, nodes, size = np.empty(n + 16, np.int64), np.empty((n + 16, 4), np.int64), np.zeros(1, np.int64)
+    keys, nodes, size = np.empty(n + 16, np.int64), np.empty((n + 16, 4), np.int64), np.zeros(PAD, np.int64)
     for k in range(n):
         keys, nodes = heap_push(keys, nodes, size, heap_key(top_nodes[k, 3], level), level,
                                 top_nodes[k, 0], top_nodes[k, 1], top_nodes[k, 2])
@@ -146,8 +152,22 @@ def make_heap(top_nodes, level):
 
 
 @njit(cache=True, nogil=True)
+def split_heap(keys, nodes, size):
+    """Deal a heap's nodes alternately into two new heaps (for a thread whose own ran out)."""
+    n = size[0]
+    out = []
+    for part in range(2):
+        k = (n - part + 1) // 2
+        pk, pn, ps = np.empty(k + 16, np.int64), np.empty((k + 16, 4), np.int64), np.zeros(PAD, np.int64)
+        for i in range(part, n, 2):
+            pk, pn = heap_push(pk, pn, ps, keys[i], nodes[i, 0], nodes[i, 1], nodes[i, 2], nodes[i, 3])
+        out.append((pk, pn, ps))
+    return out[0], out[1]
+
+
+@njit(cache=True, nogil=True)
 def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_all, row_start, shift, plane_width,
-                pad, width, height, map_w, map_h, n_angles, keep, heap, best, budget, per_level):
+                pad, width, height, map_w, map_h, n_angles, keep, heap, best, shared_best, budget, per_level):
     """Resume the best-first search for at most `budget` expansions.
 
     heap: the pending nodes, (keys, nodes, size) as make_heap returns them. Best first
@@ -168,6 +188,8 @@ def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_al
     expanded = 0
     done = False
     while expanded < budget:
+        if shared_best[0] > best:      # a leaf another thread's search found
+            best = shared_best[0]
         if size[0] == 0 or (keys[0] >> 3) < keep * best:      # the top node's bound (heap_key)
             done = True
             break
@@ -191,6 +213,8 @@ def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_al
             if h == 1:      # a leaf: its exact score
                 if cb > best:
                     best = cb
+                    if cb > shared_best[0]:
+                        shared_best[0] = cb
                 if cb >= keep * best:
                     if n_leaves == leaves.shape[0]:
                         grown = np.empty((2 * n_leaves, 4), np.int64)
@@ -280,8 +304,9 @@ def warm_up() -> None:
     widths = np.full(2, 4, np.int64)
     node_bounds(grids.ravel(), base, du, du, row_start, zeros, widths, 0, 4, 4, top[:, 0], top[:, 1], top[:, 2], 1)
     search_step(grids.ravel(), free.ravel(), zeros, widths, base, du, du, row_start, zeros, widths, 0, 4, 4,
-                2, 2, 2, 0.9, make_heap(top, 1), 0, 10,
+                2, 2, 2, 0.9, make_heap(top, 1), 0, np.zeros(1, np.int64), 10,
                 np.zeros(2, np.int64))
+    split_heap(*make_heap(top, 1))
     see_through(grids[0], np.zeros((1, 3)), np.zeros(1), np.ones(1))
     offset_tables(np.zeros(1), np.zeros(1), np.zeros(1))
     field_means(np.zeros((2, 2), np.float32), np.zeros((1, 3)), np.zeros(1), np.zeros(1))
