@@ -345,8 +345,11 @@ class BranchAndBoundMatcher(Matcher):
             if progress:   # the server's progress callback raises Cancelled on a cancel request
                 progress(min(0.95, expanded / opt.max_nodes), shared_best[0] / (255.0 * tables[1].shape[1]))
         leaves = np.concatenate(found)
-        return (leaves[leaves[:, 3] >= opt.keep_ratio * shared_best[0]], np.sum(per_level, axis=0)[:opt.levels],
-                all(done))
+        leaves = leaves[leaves[:, 3] >= opt.keep_ratio * shared_best[0]]
+        # in pose order, not the order the threads found them: equal scores then pick the
+        # same peaks (bin_maxima) whatever the threads
+        leaves = leaves[np.argsort((leaves[:, 0] * self.map.height + leaves[:, 1]) * n_angles + leaves[:, 2])]
+        return leaves, np.sum(per_level, axis=0)[:opt.levels], all(done)
 
     # ---- peaks and refinement ----------------------------------------------------
     def bin_maxima(self, tu, tv, ta, scores, d0, limit: int = 512) -> np.ndarray:
