@@ -181,7 +181,7 @@ class BranchAndBoundMatcher(Matcher):
         super().__init__(occupancy_map)
         self.options = options or BranchAndBoundOptions()
         self.last_search: dict = {}
-        self._executor = None
+        self._executor, self._executor_threads = None, 0    # the search's threads (_pool)
         self.stack = PrecomputationGridStack(occupancy_map, self.options)
         warm_up()
 
@@ -261,12 +261,12 @@ class BranchAndBoundMatcher(Matcher):
     def threads() -> int:
         """Search threads: as many as OpenCV may use (cv2.getNumThreads(), by default one
         per core), so one setting - cv2.setNumThreads - governs every matcher; the
-        benchmark's worker processes set it to 1."""
+        benchmark gives each worker process its share of the cores that way."""
         return max(1, cv2.getNumThreads())
 
     def _pool(self, threads: int) -> ThreadPoolExecutor:
-        if self._executor is None or self._executor._max_workers != threads:
-            self._executor = ThreadPoolExecutor(threads, thread_name_prefix='bnb')
+        if self._executor is None or self._executor_threads != threads:
+            self._executor, self._executor_threads = ThreadPoolExecutor(threads, thread_name_prefix='bnb'), threads
         return self._executor
 
     def match(self, points, options, progress=None):

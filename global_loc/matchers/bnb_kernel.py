@@ -141,10 +141,16 @@ def heap_pop(keys, nodes, size):
 
 
 @njit(cache=True, nogil=True)
+def empty_heap(capacity):
+    """(keys, nodes, size) with room for `capacity` nodes (more grow it)."""
+    return np.empty(capacity + 16, np.int64), np.empty((capacity + 16, 4), np.int64), np.zeros(PAD, np.int64)
+
+
+@njit(cache=True, nogil=True)
 def make_heap(top_nodes, level):
     """A heap of the top-level nodes, rows (u, v, a, bound): (keys, nodes, size)."""
     n = top_nodes.shape[0]
-    keys, nodes, size = np.empty(n + 16, np.int64), np.empty((n + 16, 4), np.int64), np.zeros(PAD, np.int64)
+    keys, nodes, size = empty_heap(n)
     for k in range(n):
         keys, nodes = heap_push(keys, nodes, size, heap_key(top_nodes[k, 3], level), level,
                                 top_nodes[k, 0], top_nodes[k, 1], top_nodes[k, 2])
@@ -157,8 +163,7 @@ def split_heap(keys, nodes, size):
     n = size[0]
     out = []
     for part in range(2):
-        k = (n - part + 1) // 2
-        pk, pn, ps = np.empty(k + 16, np.int64), np.empty((k + 16, 4), np.int64), np.zeros(PAD, np.int64)
+        pk, pn, ps = empty_heap((n - part + 1) // 2)
         for i in range(part, n, 2):
             pk, pn = heap_push(pk, pn, ps, keys[i], nodes[i, 0], nodes[i, 1], nodes[i, 2], nodes[i, 3])
         out.append((pk, pn, ps))
@@ -170,7 +175,9 @@ def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_al
                 pad, width, height, map_w, map_h, n_angles, keep, heap, best, shared_best, budget, per_level):
     """Resume the best-first search for at most `budget` expansions.
 
-    heap: the pending nodes, (keys, nodes, size) as make_heap returns them. Best first
+    heap: the pending nodes, (keys, nodes, size) as make_heap returns them. shared_best:
+    the best leaf score any thread's search has found (read before each expansion,
+    raised when this one finds better; a stale read only prunes less). Best first
     expands no node whose bound is below the best leaf, so it expands the fewest nodes
     any search with these bounds can (a depth-first walk wanders through whole subtrees under a low early
     threshold). Every node whose bound reaches keep x best is expanded; the search is
