@@ -17,8 +17,8 @@ def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]
     # `kill -USR1` prints every thread's stack: how a node that does not stop is diagnosed.
     faulthandler.register(signal.SIGUSR1, all_threads=True)
     # rclpy's own SIGTERM handler shuts the context down and wakes the executor, but in
-    # fresh-clone CI a server has stayed in its wait 10 s after a SIGTERM (three times in
-    # ~30 runs; the SIGUSR1 trace shows the main thread in wait_set.wait). rclpy chains to
+    # fresh-clone CI a server has stayed in its wait 10 s after a SIGTERM (three times so
+    # far; the SIGUSR1 trace shows the main thread in wait_set.wait). rclpy chains to
     # the handler installed before init, and the spin below returns to Python twice a
     # second, so this one ends the node either way.
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
