@@ -320,10 +320,10 @@ class BranchAndBoundMatcher(Matcher):
         expanded, found, done = 0, [], [False] * threads
 
         def run(k, budget):
-            best, n, done[k], leaves, heaps[k] = search_step(
+            n, done[k], leaves, heaps[k] = search_step(
                 self.stack.flat, self.stack.free_blocks, self.stack.free_offsets, self.stack.free_width, *tables,
-                self.map.width, self.map.height, n_angles, opt.keep_ratio, heaps[k], int(shared_best[0]),
-                shared_best, budget, per_level[k])
+                self.map.width, self.map.height, n_angles, opt.keep_ratio, heaps[k], shared_best, budget,
+                per_level[k])
             return n, leaves
 
         while True:
@@ -416,7 +416,7 @@ class BranchAndBoundMatcher(Matcher):
         weighted as likelihoods (s / s_max)^N of N independent points, plus the
         search's own resolution (a uniform cell and angle step: step^2 / 12)."""
         res = self.map.resolution
-        d_yaw = res / max(float(np.hypot(pts[:, 0], pts[:, 1]).max()), res)
+        d_yaw = self.one_cell_angle(pts)
         steps = np.arange(-half, half + 1, dtype=float)
         du, dv, da = (g.ravel() for g in np.meshgrid(steps, steps, steps * d_yaw, indexing='ij'))
         poses = np.stack([u + du, v + dv, yaw + da], axis=1)
@@ -432,11 +432,17 @@ class BranchAndBoundMatcher(Matcher):
         rot[:2, :2] = [[cy, -sy], [sy, cy]]
         return rot @ cov @ rot.T
 
+    def one_cell_angle(self, pts) -> float:
+        """The turn (rad) that moves the scan's farthest point by one cell (at least a cell
+        from the laser): the refinement's heading unit and the covariance's heading step."""
+        res = self.map.resolution
+        return res / max(float(np.hypot(pts[:, 0], pts[:, 1]).max()), res)
+
     def refine(self, u, v, yaw, pts):
         """Sub-cell pose maximizing the interpolated field (Nelder-Mead within a cell)."""
         res = self.map.resolution
         px, py = pts[:, 0] / res, pts[:, 1] / res
-        yaw_unit = 1.0 / max(float(np.hypot(px, py).max()), 1.0)   # one cell at the farthest point
+        yaw_unit = self.one_cell_angle(pts)
 
         def cost(z):
             pose = np.array([[u + z[0], v + z[1], yaw + z[2] * yaw_unit]])

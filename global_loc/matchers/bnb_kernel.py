@@ -172,10 +172,10 @@ def split_heap(keys, nodes, size):
 
 @njit(cache=True, nogil=True)
 def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_all, row_start, shift, plane_width,
-                pad, width, height, map_w, map_h, n_angles, keep, heap, best, shared_best, budget, per_level):
+                pad, width, height, map_w, map_h, n_angles, keep, heap, shared_best, budget, per_level):
     """Resume the best-first search for at most `budget` expansions.
 
-    heap: the pending nodes, (keys, nodes, size) as make_heap returns them. shared_best:
+    heap: the pending nodes, (keys, nodes, size) as make_heap returns them. shared_best[0]:
     the best leaf score any thread's search has found (read before each expansion,
     raised when this one finds better; a stale read only prunes less). Best first
     expands no node whose bound is below the best leaf, so it expands the fewest nodes
@@ -184,7 +184,7 @@ def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_al
     over when the top of the heap is below that. Leaves (level 0, exact scores)
     reaching keep x best when scored are returned; the caller prunes them by the final
     threshold. Counts expansions per level into per_level.
-    Returns (best, expansions, done, leaves (m, 4): u, v, a, score, heap).
+    Returns (expansions, done, leaves (m, 4): u, v, a, score, heap).
     """
     keys, nodes, size = heap
     leaves = np.empty((64, 4), np.int64)
@@ -192,6 +192,7 @@ def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_al
     n_points = du_all.shape[1]
     parent = np.empty(n_points, np.int64)
     parent_rest = np.zeros(n_points + 1, np.int64)     # parent_rest[i]: sum of parent[i:]
+    best = shared_best[0]
     expanded = 0
     done = False
     while expanded < budget:
@@ -234,7 +235,7 @@ def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_al
                     n_leaves += 1
             elif cb >= keep * best:
                 keys, nodes = heap_push(keys, nodes, size, heap_key(cb, h - 1), h - 1, cu, cv, ca)
-    return best, expanded, done, leaves[:n_leaves], (keys, nodes, size)
+    return expanded, done, leaves[:n_leaves], (keys, nodes, size)
 
 
 @njit(cache=True, nogil=True)
@@ -311,7 +312,7 @@ def warm_up() -> None:
     widths = np.full(2, 4, np.int64)
     node_bounds(grids.ravel(), base, du, du, row_start, zeros, widths, 0, 4, 4, top[:, 0], top[:, 1], top[:, 2], 1)
     search_step(grids.ravel(), free.ravel(), zeros, widths, base, du, du, row_start, zeros, widths, 0, 4, 4,
-                2, 2, 2, 0.9, make_heap(top, 1), 0, np.zeros(1, np.int64), 10,
+                2, 2, 2, 0.9, make_heap(top, 1), np.zeros(1, np.int64), 10,
                 np.zeros(2, np.int64))
     split_heap(*make_heap(top, 1))
     see_through(grids[0], np.zeros((1, 3)), np.zeros(1), np.ones(1))
