@@ -212,7 +212,7 @@ def failure_pictures(rows, trials, maps, out, count=2) -> list[str]:
     """Pictures of typical failures of the baseline: wrong and marked successful first."""
     wrong = [r for r in rows if r['method'] == BASELINE and not r['ok'] and 'estimate' in r and r['suite'] != 'cut']
     wrong.sort(key=lambda r: (not r['success'], r['suite'], r['trial']))
-    md = ['## Typical failures', ''] if wrong else []
+    md = [f'## Typical failures of the thesis baseline ({BASELINE})', ''] if wrong else []
     for i, r in enumerate(wrong[:count]):
         t = trials[r['trial']]
         path = os.path.join(out, f'failure_{i + 1}.png')
@@ -221,6 +221,6 @@ def failure_pictures(rows, trials, maps, out, count=2) -> list[str]:
                           title=f'{r["suite"]} / {r["map"]}: {BASELINE} {r["err_xy"]:.1f} m, {r["err_yaw_deg"]:.0f}° off, '
                                 f'score {r["score"]:.2f}, success={r["success"]}')
         md += [f'![failure {i + 1}](failure_{i + 1}.png)', '',
-               f'{r["suite"]} on {r["map"]}: {r["err_xy"]:.2f} m and {r["err_yaw_deg"]:.1f}° off, '
+               f'{BASELINE}, {r["suite"]} on {r["map"]}: {r["err_xy"]:.2f} m and {r["err_yaw_deg"]:.1f}° off, '
                f'confidence {r["confidence"]:.2f}, marked success: {r["success"]}.', '']
     return md
