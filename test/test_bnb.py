@@ -127,6 +127,30 @@ def test_four_fold_symmetric_room_is_ambiguous_with_the_truth_among_the_hypothes
     assert np.allclose(gaps, 90, atol=3), yaws     # the four peaks are 90 deg apart
 
 
+def aisles():
+    """A 12 x 6 m store at 5 cm: three identical 8 m shelves make two identical aisles, and
+    the whole is symmetric under a half turn about its centre (6, 3)."""
+    grid = np.zeros((120, 240), dtype=int)      # OccupancyGrid rows: y = row x 5 cm
+    grid[0, :] = grid[-1, :] = grid[:, 0] = grid[:, -1] = 100
+    for y in (1.5, 3.0, 4.5):
+        grid[round(y / 0.05) - 3:round(y / 0.05) + 3, 40:200] = 100
+    return from_occupancy_grid(240, 120, 0.05, (0.0, 0.0, 0.0), grid.ravel())
+
+
+def test_identical_aisles_are_ambiguous_with_the_truth_and_its_twins_among_the_hypotheses():
+    """At the end of an aisle, looking out (180 deg, 4 m): the other aisle's end and the
+    half-turned ends look the same."""
+    m = aisles()
+    truth = Rigid2D(8.5, 2.25, 0.0)
+    twins = [truth, Rigid2D(8.5, 3.75, 0.0), Rigid2D(3.5, 3.75, math.pi), Rigid2D(3.5, 2.25, math.pi)]
+    scan = simulate_scan(m, truth, 180.0, 361, 4.0, noise_std=0.005, rng=np.random.default_rng(7))
+    result = Localizer(m).localize(scan, method='bnb')
+    assert not result.success and result.message.startswith('ambiguous: 3 other place(s)'), result.message
+    for twin in twins:
+        assert any(pose_error(h.pose, twin)[0] < 0.1 and pose_error(h.pose, twin)[1] < 2.0
+                   for h in result.hypotheses), (twin, [h.pose for h in result.hypotheses])
+
+
 def test_confident_result_has_a_positive_definite_covariance_from_the_landscape(office_map):
     truth = Rigid2D(3.0, 4.0, 0.7)
     scan = simulate_scan(office_map, truth, 270.0, 541, 20.0, noise_std=0.01, rng=np.random.default_rng(4))

@@ -217,9 +217,12 @@ class BranchAndBoundMatcher(Matcher):
                                         f'{100 * (rival_c.see_through or 0.0):.0f}% of its beams would pass through '
                                         f'walls ({100 * (best.see_through or 0.0):.0f}% for the best); '
                                         f'see the hypotheses')
-        close = sum(c.score >= best.score * (1.0 - 2 * margin) for c in others) if margin > 0 else len(others)
-        return Verdict(False, conf, f'ambiguous: {max(close, 1)} other place(s) match within '
-                                    f'{100 * margin:.1f}% of the best; see the hypotheses')
+        # the rivals: every other place within the lead a confident answer needs at this fit
+        # (not only those within twice the margin: exact twins differ by rounding, ~1e-15)
+        need = opt.min_confidence * (1.0 - opt.keep_ratio) / explained
+        close = sum(c.score >= best.score * (1.0 - need) for c in others)
+        return Verdict(False, conf, f'ambiguous: {max(close, 1)} other place(s) within {100 * need:.0f}% of the '
+                                    f'best (the closest {100 * max(margin, 0.0):.1f}% behind); see the hypotheses')
 
     # ---- scan preparation --------------------------------------------------------
     def prepare(self, points: np.ndarray) -> np.ndarray:
