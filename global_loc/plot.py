@@ -10,8 +10,8 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .map_io import OccupancyMap  # noqa: E402
-from .transform import Rigid2D  # noqa: E402
+from .core.map_io import OccupancyMap  # noqa: E402
+from .core.transform import Rigid2D  # noqa: E402
 
 
 def plot_localization(path: str, occupancy_map: OccupancyMap, points_laser: np.ndarray,
@@ -21,14 +21,14 @@ def plot_localization(path: str, occupancy_map: OccupancyMap, points_laser: np.n
     occ = occupancy_map.occupancy
     shade = np.where(occ < 0, 0.8, 1.0 - np.clip(occ, 0, 100) / 100.0)
     h, w = occ.shape
-    corners = occupancy_map.pixel_to_world(np.array([[-0.5, h - 0.5], [w - 0.5, -0.5]]))
+    corners = occupancy_map.frame.pixel_to_world(np.array([[-0.5, h - 0.5], [w - 0.5, -0.5]]))
     fig, ax = plt.subplots(figsize=(9, 9 * h / max(w, 1) + 0.8))
     if abs(occupancy_map.origin.yaw) < 1e-9:
         ax.imshow(shade, cmap='gray', vmin=0, vmax=1, origin='upper', interpolation='nearest',
                   extent=(corners[0, 0], corners[1, 0], corners[0, 1], corners[1, 1]))
     else:   # rotated map origin: draw occupied cells as points in the map frame
         rows, cols = np.nonzero(occupancy_map.occupied)
-        xy = occupancy_map.pixel_to_world(np.stack([cols, rows], axis=1))
+        xy = occupancy_map.frame.pixel_to_world(np.stack([cols, rows], axis=1))
         ax.plot(xy[:, 0], xy[:, 1], 's', color='k', markersize=1)
     arrow = max(0.6, 0.03 * max(w, h) * occupancy_map.resolution)
 

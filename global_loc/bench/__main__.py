@@ -24,6 +24,8 @@ from .suites import ANGLE_STEP_METHODS, METHODS, carmen_trials, cut_trials, load
 from .worker import run_job, worker_init
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
 def machine_info() -> dict:
     cpu = platform.processor()
     try:
@@ -53,9 +55,8 @@ def precompute_cost(m, size: int = 2000) -> dict:
     or loaded from cache first, so their one-time cost is not counted)."""
     import resource
 
-    from ..map_io import from_occupancy_grid
-    from ..matchers.bnb import BranchAndBoundMatcher
-    from ..matchers.bnb_kernel import warm_up
+    from ..core.map_io import from_occupancy_grid
+    from ..core.matchers.bnb import BranchAndBoundMatcher, warm_up
     warm_up()
     grid = np.where(m.occupied, 100, np.where(m.free, 0, -1))
     reps = (size // grid.shape[0] + 1, size // grid.shape[1] + 1)

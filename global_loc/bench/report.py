@@ -10,9 +10,9 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ..core.scan import scan_to_points  # noqa: E402
+from ..core.transform import Rigid2D  # noqa: E402
 from ..plot import plot_localization  # noqa: E402
-from ..scan import scan_to_points  # noqa: E402
-from ..transform import Rigid2D  # noqa: E402
 
 BASELINE = 'template_ccoeff'
 

@@ -8,13 +8,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..carmen import GridFrame, held_out_folds, read_flaser
-from ..map_io import OccupancyMap, load_map_yaml
-from ..paths import default_map_yaml
-from ..raycast import points_cut_from_map, sample_free_poses
-from ..scan import Scan, ScanPoints
-from ..sim.simulator import BASE_T_LASER, LaserConfig, Simulator
-from ..transform import Rigid2D
+from ..core.map_io import OccupancyMap, load_map_yaml
+from ..core.paths import default_map_yaml
+from ..core.scan import Scan, ScanPoints
+from ..core.transform import Rigid2D
+from ..sim.laser import LaserConfig
+from ..sim.raycast import points_cut_from_map, sample_free_poses
+from ..sim.simulator import BASE_T_LASER, Simulator
+from .carmen import LogGrid, held_out_folds, read_flaser
 
 THESIS_METHODS = ['template_ccoeff', 'template_sqdiff', 'features_orb', 'features_sift']
 METHODS = ['bnb'] + THESIS_METHODS
@@ -115,7 +116,7 @@ def carmen_trials(shared_dir: str, scans_per_log: int, seed: int) -> tuple[list[
         if not os.path.exists(path):
             continue
         records = read_flaser(path)
-        fold_maps, kept, counts = held_out_folds(records, GridFrame(records, 0.05))
+        fold_maps, kept, counts = held_out_folds(records, LogGrid(records, 0.05))
         rng = np.random.default_rng(seed)
         chosen = sorted(rng.choice(len(kept), size=min(scans_per_log, len(kept)), replace=False))
         counts['sampled'] = len(chosen)

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import math
 
-from ..localizer import Localizer, pose_error
+from ..core.localizer import Localizer
+from ..core.transform import pose_correct, pose_error
 
 _MAPS = {}        # map name -> OccupancyMap, in each worker (set by worker_init)
 _LOCALIZERS = {}  # per worker process
@@ -30,19 +31,17 @@ def run_job(job):
                 'time_s': float('nan')}
     row.update(time_s=res.time_s, success=res.success, confidence=res.confidence,
                score=res.score if math.isfinite(res.score) else None, found=res.pose is not None,
-               top4_ok=any(_ok(pose_error(h.pose, trial.truth), 0.2, 5) for h in res.hypotheses[:4]),
-               hyp_scores=[round(h.score, 4) for h in res.hypotheses[:4]], message=res.message.split(':')[0])
+               top4_ok=any(pose_correct(h.pose, trial.truth) for h in res.hypotheses[:4]),
+               hyp_scores=[round(h.score, 4) for h in res.hypotheses[:4]], message=res.message.split(':')[0],
+               outcome=res.outcome.label)
     if res.pose is None:
         row.update(ok=False, ok_loose=False)
     else:
         err = pose_error(res.pose, trial.truth)
         row.update(estimate=[round(v, 4) for v in res.pose.as_tuple()], err_xy=round(err[0], 4),
-                   err_yaw_deg=round(err[1], 3), ok=_ok(err, 0.2, 5), ok_loose=_ok(err, 0.5, 10))
+                   err_yaw_deg=round(err[1], 3), ok=pose_correct(res.pose, trial.truth),
+                   ok_loose=pose_correct(res.pose, trial.truth, 0.5, 10.0))
     return row
-
-
-def _ok(err, d, a):
-    return bool(err[0] < d and err[1] < a)
 
 
 def worker_init(maps, threads):

@@ -2,7 +2,7 @@
 
     sim = Simulator(load_map_yaml('maps/office.yaml'), LaserConfig(fov_deg=270))
     sim.place(Rigid2D(3.0, 4.0, 0.7))          # the kidnapping
-    scan = sim.scan()                          # a global_loc.scan.Scan
+    scan = sim.scan()                          # a global_loc.core.scan.Scan
     sim.drive(v=0.0, w=0.5, duration=1.0)      # wheels, physics stepped at 240 Hz
     sim.true_pose()                            # base_link in the map frame
 
@@ -18,9 +18,11 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 
-from ..map_io import OccupancyMap
-from ..scan import Scan
-from ..transform import Rigid2D
+from ..core.map_io import OccupancyMap
+from ..core.scan import Scan
+from ..core.transform import Rigid2D
+from .laser import LaserConfig
+from .raycast import sample_free_poses
 from .world import add_map_walls
 
 URDF = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'pioneer3dx.urdf')
@@ -30,28 +32,6 @@ LASER_HEIGHT = 0.30
 WHEEL_RADIUS = 0.0975
 WHEEL_SEPARATION = 0.33
 PHYSICS_HZ = 240.0
-
-
-@dataclass
-class LaserConfig:
-    fov_deg: float = 270.0
-    num_beams: int = 541
-    range_min: float = 0.05
-    range_max: float = 20.0
-    noise_std: float = 0.01      # Gaussian range noise, m
-    dropout: float = 0.01        # fraction of beams with no return (NaN)
-    rate_hz: float = 10.0
-
-    def angles(self) -> tuple[float, float, np.ndarray]:
-        """(angle_min, angle_increment, angles) centred on the laser's x axis."""
-        fov = math.radians(self.fov_deg)
-        if self.fov_deg >= 360.0:
-            inc = fov / self.num_beams
-            a0 = -math.pi
-        else:
-            inc = fov / (self.num_beams - 1)
-            a0 = -fov / 2.0
-        return a0, inc, a0 + inc * np.arange(self.num_beams)
 
 
 @dataclass
@@ -126,7 +106,6 @@ class Simulator:
 
     def random_clutter(self, count: int, keep_clear_of: Rigid2D | None = None, clear_radius: float = 1.0):
         """`count` chairs/bins/people-sized objects on free cells, away from a pose."""
-        from ..raycast import sample_free_poses
         objects = []
         for pose in sample_free_poses(self.map, count * 4, self.rng, clearance=0.5):
             if keep_clear_of is not None and math.hypot(pose.x - keep_clear_of.x, pose.y - keep_clear_of.y) < clear_radius:
@@ -160,9 +139,5 @@ class Simulator:
                                 np.full(len(world), pos[2])])
         hits = p.rayTestBatch(starts.tolist(), ends.tolist(), numThreads=0, physicsClientId=self.client)
         frac = np.array([h[2] if h[0] >= 0 else np.inf for h in hits])
-        ranges = cfg.range_min + frac * (cfg.range_max - cfg.range_min)
-        if cfg.noise_std > 0:
-            ranges = ranges + self.rng.normal(0.0, cfg.noise_std, ranges.shape)
-        if cfg.dropout > 0:
-            ranges[self.rng.random(ranges.shape) < cfg.dropout] = np.nan
+        ranges = cfg.corrupt(cfg.range_min + frac * (cfg.range_max - cfg.range_min), self.rng)
         return Scan(a0, inc, cfg.range_min, cfg.range_max, ranges)

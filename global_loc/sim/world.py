@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..map_io import OccupancyMap
+from ..core.map_io import OccupancyMap
 
 WALL_HEIGHT = 1.0   # m; the laser scans at 0.30 m
 
@@ -44,7 +44,7 @@ def add_map_walls(client, occupancy_map: OccupancyMap) -> int:
     quat = p.getQuaternionFromEuler([0, 0, o.yaw])
     # Pixel rectangle -> centre in the map frame (through the map's own conversion).
     centres_px = np.array([[(c0 + c1 - 1) / 2.0, (r0 + r1 - 1) / 2.0] for r0, c0, r1, c1 in boxes])
-    centres = occupancy_map.pixel_to_world(centres_px)
+    centres = occupancy_map.frame.pixel_to_world(centres_px)
     for (r0, c0, r1, c1), (x, y) in zip(boxes, centres):
         half = [(c1 - c0) * res / 2.0, (r1 - r0) * res / 2.0, WALL_HEIGHT / 2.0]
         shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)

@@ -1,8 +1,10 @@
 """Matchers by name. Each is built once per map and reused (see base.Matcher)."""
 from __future__ import annotations
 
-from .base import Candidate, Cancelled, Matcher, MatchOptions, MethodError
-from .bnb import BranchAndBoundMatcher
+from typing import Optional
+
+from .base import Candidate, Match, Matcher, MatchOptions, MethodError
+from .bnb import BranchAndBoundMatcher, BranchAndBoundOptions
 from .features import FeatureMatcher, surf_available
 from .template import ccoeff_matcher, sqdiff_matcher
 
@@ -32,9 +34,13 @@ def resolve_method(name: str) -> str:
     return name
 
 
-def make_matcher(name: str, occupancy_map) -> Matcher:
-    return _FACTORIES[resolve_method(name)](occupancy_map)
+def make_matcher(name: str, occupancy_map, bnb_options: Optional[BranchAndBoundOptions] = None) -> Matcher:
+    """The matcher `name` built for `occupancy_map` (bnb with `bnb_options`)."""
+    name = resolve_method(name)
+    if name == 'bnb':
+        return BranchAndBoundMatcher(occupancy_map, bnb_options)
+    return _FACTORIES[name](occupancy_map)
 
 
-__all__ = ['Candidate', 'Cancelled', 'Matcher', 'MatchOptions', 'MethodError', 'make_matcher',
+__all__ = ['BranchAndBoundOptions', 'Candidate', 'Match', 'Matcher', 'MatchOptions', 'MethodError', 'make_matcher',
            'method_names', 'resolve_method']

@@ -1,28 +1,27 @@
 """The one interface every matcher implements.
 
 A matcher is built once per map (precomputation in __init__, reused for every scan)
-and aligns one scan's points against that map. `match` returns candidate laser poses
-in the map frame with scores, best first, where a higher score is better; it reports
-progress through `progress(fraction, best_score)`, which may raise `Cancelled` to stop
-the search early.
+and aligns one scan's points against that map. `match` returns a `Match`: candidate
+laser poses in the map frame with scores, best first (higher is better), and what the
+search wants the verdict to know (bnb: whether it was exhaustive). It reports progress
+through `progress(fraction, best_score)`, which may raise `Cancelled` to stop it early.
+`judge` turns the distinct hypotheses and those statistics into a Verdict; it reads
+nothing else, so one matcher serves any number of threads and callers.
 """
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Callable, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
 from ..map_io import OccupancyMap
+from ..outcome import Outcome
 from ..scan import ScanPoints
 from ..transform import Rigid2D
 
 ProgressFn = Callable[[float, float], None]
-
-
-class Cancelled(Exception):
-    """Raised from a progress callback to abandon a search."""
 
 
 class MethodError(ValueError):
@@ -55,10 +54,21 @@ def distinct(candidates: list[Candidate], k: int, min_distance: float, min_angle
 
 
 @dataclass
+class Match:
+    """What one `match` call found."""
+    candidates: list[Candidate]
+    stats: Any = None        # the matcher's search statistics (bnb: SearchStats), for its verdict
+
+
+@dataclass
 class Verdict:
-    success: bool
+    outcome: Outcome
     confidence: float      # 0..1
     message: str
+
+    @property
+    def success(self) -> bool:
+        return self.outcome == Outcome.LOCALIZED
 
 
 @dataclass
@@ -77,20 +87,20 @@ class Matcher(ABC):
     def __init__(self, occupancy_map: OccupancyMap):
         self.map = occupancy_map
 
-    def judge(self, candidates: list[Candidate]) -> Verdict:
-        """Success and confidence from the distinct hypotheses, best first. The thesis
-        matchers: success = best score at least min_score; confidence = how far the best
-        stands above the next, relative to it."""
+    def judge(self, candidates: list[Candidate], stats: Any = None) -> Verdict:
+        """The verdict on the distinct hypotheses, best first. The thesis matchers:
+        localized when the best score is at least min_score; confidence = how far the
+        best stands above the next, relative to it."""
         scores = [c.score for c in candidates]
         if not scores:
-            return Verdict(False, 0.0, f'{self.name} found no match')
+            return Verdict(Outcome.NO_MATCH, 0.0, f'{self.name} found no match')
         best = scores[0]
         conf = 1.0 if len(scores) == 1 else float(np.clip((best - scores[1]) / best, 0.0, 1.0)) if best > 0 else 0.0
         if best >= self.min_score:
-            return Verdict(True, conf, 'localized')
-        return Verdict(False, conf, f'best score {best:.3f} is below {self.name}\'s minimum {self.min_score}')
+            return Verdict(Outcome.LOCALIZED, conf, 'localized')
+        return Verdict(Outcome.POOR_MATCH, conf,
+                       f'best score {best:.3f} is below {self.name}\'s minimum {self.min_score}')
 
     @abstractmethod
-    def match(self, points: ScanPoints, options: MatchOptions,
-              progress: Optional[ProgressFn] = None) -> list[Candidate]:
-        """Candidates for the laser pose, best first (possibly empty)."""
+    def match(self, points: ScanPoints, options: MatchOptions, progress: Optional[ProgressFn] = None) -> Match:
+        """Candidates for the laser pose, best first (possibly none), and the search's statistics."""

@@ -3,7 +3,8 @@
 `Rigid2D(x, y, yaw)` is the pose of a child frame in a parent frame; `a * b` composes
 (parent_T_child * child_T_grandchild), `inverse()` inverts, `apply()` maps points.
 Everything else in global_loc (pixel frames, matches, laser mounting) composes these
-instead of writing out trigonometry.
+instead of writing out trigonometry. Also here: how far one pose is from another, the
+success test every evaluation uses, and the one way a pose is printed.
 """
 from __future__ import annotations
 
@@ -70,3 +71,26 @@ def covariance_of_composition(pose: Rigid2D, covariance, child: Rigid2D) -> np.n
                   [0.0, 1.0, c * child.x - s * child.y],
                   [0.0, 0.0, 1.0]])
     return j @ np.asarray(covariance, dtype=float) @ j.T
+
+
+# A localization is right when it is this close to the truth (the thesis's criterion).
+CORRECT_XY_M = 0.2
+CORRECT_YAW_DEG = 5.0
+
+
+def pose_error(estimate: Rigid2D, truth: Rigid2D) -> tuple[float, float]:
+    """(metres, degrees) between two poses."""
+    d, a = estimate.distance_to(truth)
+    return d, math.degrees(a)
+
+
+def pose_correct(estimate: Rigid2D, truth: Rigid2D, max_xy: float = CORRECT_XY_M,
+                 max_yaw_deg: float = CORRECT_YAW_DEG) -> bool:
+    """Whether `estimate` is within max_xy metres and max_yaw_deg degrees of `truth`."""
+    d, a = pose_error(estimate, truth)
+    return bool(d < max_xy and a < max_yaw_deg)
+
+
+def format_pose(p: Rigid2D) -> str:
+    """The one human-readable form of a pose: 'x=1.234 y=5.678 yaw=90.0 deg'."""
+    return f'x={p.x:.3f} y={p.y:.3f} yaw={math.degrees(p.yaw):.1f} deg'

@@ -1,14 +1,8 @@
-"""Occupancy maps: loading nav2_map_server YAML + image, or an OccupancyGrid-like array,
-and the conversion between map metres and image pixels.
-
-Conventions (those of nav2_map_server / nav_msgs/OccupancyGrid):
-- `occupancy[row, col]` in image order: row 0 is the top of the image = the largest y.
-  Values: 100 occupied, 0 free, -1 unknown (`scale` mode: 0..100).
-- `origin` is the pose of the lower-left corner of the lower-left pixel in the map frame.
-- A pixel's "grid frame" has x along columns and y up along rows, in metres, with its
-  origin at the lower-left image corner; `origin * grid` is the map frame.
-- Continuous pixel coordinates (u, v) follow OpenCV: pixel (col, row) has its centre at
-  (u, v) = (col, row).
+"""Occupancy maps: loading a nav2_map_server map (YAML + image) or OccupancyGrid fields
+into one type, `OccupancyMap`, with nav2's semantics and a clear MapError for every
+malformed input. `occupancy[row, col]` is in image order (row 0 = the largest y), 100
+occupied, 0 free, -1 unknown (`scale` mode: 0..100); where the cells are in the world is
+the map's GridFrame (core/grid_frame.py).
 """
 from __future__ import annotations
 
@@ -20,6 +14,7 @@ import cv2
 import numpy as np
 import yaml
 
+from .grid_frame import GridFrame
 from .transform import Rigid2D
 
 OCCUPIED = 100
@@ -34,9 +29,16 @@ class MapError(ValueError):
 @dataclass
 class OccupancyMap:
     occupancy: np.ndarray          # int8 (H, W), image row order, 100 / 0 / -1
-    resolution: float              # metres per cell
-    origin: Rigid2D                # map_T_grid: lower-left corner of the image
+    frame: GridFrame               # where the cells are (resolution, size, origin)
     source: str = '<array>'
+
+    @property
+    def resolution(self) -> float:
+        return self.frame.resolution
+
+    @property
+    def origin(self) -> Rigid2D:
+        return self.frame.origin
 
     @property
     def height(self) -> int:
@@ -55,30 +57,20 @@ class OccupancyMap:
     def free(self) -> np.ndarray:
         return (self.occupancy >= 0) & (self.occupancy < 35)
 
-    def pixel_to_grid(self, uv) -> np.ndarray:
-        """(N, 2) continuous pixel coordinates -> (N, 2) grid-frame metres."""
-        uv = np.asarray(uv, dtype=float).reshape(-1, 2)
-        return np.stack([(uv[:, 0] + 0.5) * self.resolution,
-                         (self.height - uv[:, 1] - 0.5) * self.resolution], axis=1)
-
-    def grid_to_pixel(self, xy) -> np.ndarray:
-        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
-        return np.stack([xy[:, 0] / self.resolution - 0.5,
-                         self.height - xy[:, 1] / self.resolution - 0.5], axis=1)
-
-    def pixel_to_world(self, uv) -> np.ndarray:
-        return self.origin.apply(self.pixel_to_grid(uv))
-
-    def world_to_pixel(self, xy) -> np.ndarray:
-        return self.grid_to_pixel(self.origin.inverse().apply(xy))
-
     def is_free_at(self, xy) -> np.ndarray:
         """True where the world points fall on free cells inside the map."""
-        uv = np.rint(self.world_to_pixel(xy)).astype(int)
-        inside = (uv[:, 0] >= 0) & (uv[:, 0] < self.width) & (uv[:, 1] >= 0) & (uv[:, 1] < self.height)
-        out = np.zeros(len(uv), dtype=bool)
-        out[inside] = self.free[uv[inside, 1], uv[inside, 0]]
+        cells = self.frame.cell_of(xy)
+        inside = self.frame.contains(cells)
+        out = np.zeros(len(cells), dtype=bool)
+        out[inside] = self.free[cells[inside, 1], cells[inside, 0]]
         return out
+
+    def distance_to_occupied(self) -> np.ndarray:
+        """float32 (H, W): each cell's distance in cells to the nearest occupied cell
+        (1e6 everywhere on a map without one)."""
+        if not self.occupied.any():
+            return np.full(self.occupancy.shape, 1e6, np.float32)
+        return cv2.distanceTransform((~self.occupied).astype(np.uint8), cv2.DIST_L2, 5)
 
     def obstacle_image(self) -> np.ndarray:
         """uint8 image, 255 on occupied cells and 0 elsewhere (the matchers' polarity)."""
@@ -90,6 +82,11 @@ class OccupancyMap:
         the walls' thickness, so image matchers compare like with like against this."""
         free_nearby = cv2.dilate(self.free.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
         return np.where(self.occupied & free_nearby, 255, 0).astype(np.uint8)
+
+
+def make_map(occupancy: np.ndarray, resolution: float, origin: Rigid2D, source: str = '<array>') -> OccupancyMap:
+    """An OccupancyMap from an int8 grid in image row order."""
+    return OccupancyMap(occupancy, GridFrame(resolution, occupancy.shape[1], occupancy.shape[0], origin), source)
 
 
 def from_occupancy_grid(width, height, resolution, origin, data, source='<OccupancyGrid>') -> OccupancyMap:
@@ -111,7 +108,7 @@ def from_occupancy_grid(width, height, resolution, origin, data, source='<Occupa
         raise MapError(f'{source}: cell values must lie in -1..100')
     if not isinstance(origin, Rigid2D):
         origin = Rigid2D(*[float(v) for v in origin])
-    return OccupancyMap(np.flipud(grid).astype(np.int8), resolution, origin, source)
+    return make_map(np.flipud(grid).astype(np.int8), resolution, origin, source)
 
 
 def _require(doc, key, path):
@@ -189,7 +186,7 @@ def load_map_yaml(path) -> OccupancyMap:
             grid[mid] = np.rint(99.0 * (occ[mid] - free_th) / (occ_th - free_th)).astype(np.int16)
             if alpha is not None:
                 grid[alpha < 255] = UNKNOWN
-    return OccupancyMap(grid.astype(np.int8), resolution, Rigid2D(*origin), path)
+    return make_map(grid.astype(np.int8), resolution, Rigid2D(*origin), path)
 
 
 def save_map_yaml(occupancy_map: OccupancyMap, yaml_path, image_name=None) -> None:

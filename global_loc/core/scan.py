@@ -1,7 +1,8 @@
 """Laser scans: the LaserScan fields as a plain type, validated and turned into points.
 
 `Scan` carries exactly the sensor_msgs/LaserScan fields the method needs, so the ROS
-node, the CLI (JSON lines) and the simulator all build the same object.
+node, the CLI (JSON lines), the simulator and the log readers all build the same object,
+and `scan_to_points` is the one place that decides which readings count.
 """
 from __future__ import annotations
 
@@ -37,6 +38,10 @@ class Scan:
         except (TypeError, ValueError) as e:
             raise ScanError(f'scan has a non-numeric field: {e}') from None
 
+    def angles(self) -> np.ndarray:
+        """Each beam's angle in the laser frame (counter-clockwise from x)."""
+        return self.angle_min + self.angle_increment * np.arange(np.asarray(self.ranges).size)
+
     def to_dict(self) -> dict:
         return {'angle_min': self.angle_min, 'angle_increment': self.angle_increment,
                 'range_min': self.range_min, 'range_max': self.range_max,
@@ -71,7 +76,7 @@ def scan_to_points(scan: Scan) -> ScanPoints:
     ranges = np.asarray(scan.ranges, dtype=float).ravel()
     if ranges.size == 0:
         raise ScanError('scan has no readings')
-    angles = scan.angle_min + scan.angle_increment * np.arange(ranges.size)
+    angles = scan.angles()
     nan = np.isnan(ranges)
     inf = np.isinf(ranges)
     finite = ~(nan | inf)
@@ -84,8 +89,12 @@ def scan_to_points(scan: Scan) -> ScanPoints:
     if not ok.any():
         raise ScanError(f'scan has no valid reading among {ranges.size} '
                         f'(dropped: {", ".join(f"{k}={v}" for k, v in dropped.items() if v)})')
-    r, a = ranges[ok], angles[ok]
-    pts = np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+    pts = polar_to_points(ranges[ok], angles[ok])
     # -inf is "too close to measure" (REP 117), NaN unknown: neither says the beam's path is free.
     no_return = (inf & (ranges > 0)) | high
     return ScanPoints(pts, float(scan.range_max), int(ranges.size), dropped, angles[no_return])
+
+
+def polar_to_points(ranges: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """(N, 2) laser-frame points of beams of `ranges` at `angles`."""
+    return np.stack([ranges * np.cos(angles), ranges * np.sin(angles)], axis=1)

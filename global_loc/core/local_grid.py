@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .grid_frame import GridFrame
 from .scan import ScanPoints
 from .transform import Rigid2D
 
@@ -33,24 +34,25 @@ class LocalGrid:
     def width(self) -> int:
         return self.image.shape[1]
 
+    @property
+    def frame(self) -> GridFrame:
+        """The image's own grid frame (origin at its lower-left corner)."""
+        return GridFrame(self.resolution, self.width, self.height)
+
     def grid_T_laser(self) -> Rigid2D:
-        """The laser's pose in this image's grid frame (x right, y up, metres from the
-        lower-left corner); the laser's x axis points along the image's +u."""
-        u, v = self.laser_px
-        return Rigid2D((u + 0.5) * self.resolution, (self.height - v - 0.5) * self.resolution, 0.0)
+        """The laser's pose in this image's grid frame; its x axis points along +u."""
+        return self.frame.pixel_pose_to_world(*self.laser_px, 0.0)
 
 
 def rasterize(points: ScanPoints, resolution: float, laser_yaw: float = 0.0) -> LocalGrid:
     """Draw the scan's points (rotated by `laser_yaw`) into a (2R/res + 1)^2 image with the
     laser at the centre pixel."""
     half = int(np.ceil(points.range_max / resolution))
-    side = 2 * half + 1
-    pts = Rigid2D(0.0, 0.0, laser_yaw).apply(points.points)
-    u = np.rint(half + pts[:, 0] / resolution).astype(int)
-    v = np.rint(half - pts[:, 1] / resolution).astype(int)
-    keep = (u >= 0) & (u < side) & (v >= 0) & (v < side)
-    image = np.zeros((side, side), dtype=np.uint8)
-    image[v[keep], u[keep]] = 255
+    frame = GridFrame.centred(resolution, half)
+    cells = frame.cell_of(Rigid2D(0.0, 0.0, laser_yaw).apply(points.points))
+    keep = frame.contains(cells)
+    image = np.zeros((frame.height, frame.width), dtype=np.uint8)
+    image[cells[keep, 1], cells[keep, 0]] = 255
     return LocalGrid(image, resolution, (float(half), float(half)))
 
 
@@ -84,3 +86,10 @@ def build_local_grid(points: ScanPoints, resolution: float, opening_kernel: int,
                      laser_yaw: float = 0.0) -> LocalGrid:
     """Scan points -> rasterized, cropped, morphologically opened local map."""
     return close_obstacles(crop_to_obstacles(rasterize(points, resolution, laser_yaw)), opening_kernel)
+
+
+def soften(image: np.ndarray) -> np.ndarray:
+    """A one-cell Gaussian blur, applied alike to the map image and a local map: one-pixel
+    lines a sub-cell apart (rasterization, rotation) then still overlap, and feature
+    detectors see gradients instead of dots."""
+    return cv2.GaussianBlur(image, (5, 5), 1.0)

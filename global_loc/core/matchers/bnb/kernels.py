@@ -1,75 +1,87 @@
-"""Compiled (numba) inner loops of the branch-and-bound matcher: a node's bound, and the
-best-first search itself. numpy cannot walk a search tree one node at a time fast
-enough, and batching nodes for numpy (the previous design) wasted expansions because its
-pruning threshold lagged behind the best leaf: on real logs this kernel needs 5-20x
-fewer expansions and does each ~10x faster. Numbers only here: the geometry (angle
-tables, which grid each point reads) is prepared in bnb.py. Compiled on first use and
-cached on disk (numba cache=True), so only a machine's first run pays the ~15 s.
+"""Compiled (numba) inner loops of the branch-and-bound search: a node's bound, the heap
+of pending nodes, and the best-first search itself. numpy cannot walk a search tree one
+node at a time fast enough. Numbers only here: the geometry (angle tables, which plane
+each point reads) is prepared by matcher.py, the planes by grids.py. Compiled on first
+use and cached on disk (numba cache=True).
 
 A node is (u, v, a, h): cells u .. u + 2^h - 1, v .. v + 2^h - 1 of the map, angle
 indices a .. a + 2^h - 1. Its bound is the sum over the scan's points of the point's
-plane (the one widened for its range, bnb.PrecomputationGridStack.grid_ids) at the
-point's cell, the point rotated by the node's middle angle (row row_start[h] + a >> h
-of the offset tables). Sums are integers (planes are uint8).
+plane (the one widened for its range) at the point's cell, the point rotated by the
+node's middle angle (row row_start[h] + a >> h of the offset tables). Sums are integers
+(planes are uint8).
 
-The planes are one flat array (`flat`): point i at level h reads the plane starting at
-base[h, i], at (y >> shift[h]) * plane_width[h] + (x >> shift[h]) (x, y: the cell in the
-padded map; see PrecomputationGridStack), with unsigned bounds tests: numba's 3-d
-indexing with signed indices (wraparound) cost twice as much per point.
+The kernels take a few named tuples (numba compiles attribute reads to plain loads):
+`Planes` (per map: where a plane's cell is in the one flat array), `ScanTables` (per
+scan: each point's offsets and planes), `FreeBlocks` (per map) and `SearchSpace`.
 """
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit, uint64
 
+from ...pixel_kernels import image_point
+
+# Plane k starts at flat[offsets[k]]; a level-h plane is stored at 1 / 2^shift[h] of the
+# map's resolution, plane_width[h] cells wide; (width, height): the padded map, pad: its
+# margin in cells (see grids.PrecomputationGridStack).
+Planes = namedtuple('Planes', 'flat shift plane_width pad width height')
+# base[h, i]: where the plane point i reads at level h starts; du, dv[row, i]: point i's
+# cell offset at the angle of `row`; level h's rows start at row_start[h].
+ScanTables = namedtuple('ScanTables', 'base du dv row_start')
+# flags[offsets[h] + (v >> h) * width[h] + (u >> h)]: level-h block (u, v) holds a free cell.
+FreeBlocks = namedtuple('FreeBlocks', 'flags offsets width')
+# The map's size in cells, the number of leaf angles, and keep: nodes bounded at or above
+# keep x the best leaf are expanded.
+SearchSpace = namedtuple('SearchSpace', 'map_w map_h n_angles keep')
+
 
 @njit(cache=True, nogil=True, inline='always')
-def plane_value(flat, start, shift, plane_width, width, height, x, y):
-    """The value of the plane starting at flat[start] at cell (x, y) of the padded map;
-    0 outside it (unsigned comparisons also catch x, y < 0)."""
-    if uint64(x) < uint64(width) and uint64(y) < uint64(height):
-        return np.int64(flat[uint64(start + (y >> shift) * plane_width + (x >> shift))])
+def plane_value(planes, start, h, x, y):
+    """The value of the level-h plane starting at flat[start] at cell (x, y) of the padded
+    map; 0 outside it (unsigned comparisons also catch x, y < 0)."""
+    if uint64(x) < uint64(planes.width) and uint64(y) < uint64(planes.height):
+        shift = planes.shift[h]
+        return np.int64(planes.flat[uint64(start + (y >> shift) * planes.plane_width[h] + (x >> shift))])
     return np.int64(0)
 
 
 @njit(cache=True, nogil=True)
-def point_values(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, u, v, a, h, out):
+def point_values(planes, tables, u, v, a, h, out):
     """Each point's term of the node's bound, into out."""
-    row = row_start[h] + (a >> h)
-    for i in range(du_all.shape[1]):
-        out[i] = plane_value(flat, base[h, i], shift[h], plane_width[h], width, height,
-                             u + pad + du_all[row, i], v + pad + dv_all[row, i])
+    row = tables.row_start[h] + (a >> h)
+    for i in range(tables.du.shape[1]):
+        out[i] = plane_value(planes, tables.base[h, i], h, u + planes.pad + tables.du[row, i],
+                             v + planes.pad + tables.dv[row, i])
 
 
 @njit(cache=True, nogil=True)
-def child_bound(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, u, v, a, h, parent,
-                parent_rest, floor):
+def child_bound(planes, tables, u, v, a, h, parent, parent_rest, floor):
     """A child's bound, each point's term capped by its parent's (parent[i]): every leaf
     under the child is under the parent, whose term bounds the leaf's for each point,
     so the capped sum is still a bound, and a tighter one. Capped terms never exceed the
     parent's, so as soon as the sum so far plus the parent's terms for the points left
     (parent_rest[i + 1]) is below `floor`, the child is pruned: the value returned is
     then below `floor` too. Most children are pruned, most of them after a few points."""
-    row = row_start[h] + (a >> h)
+    row = tables.row_start[h] + (a >> h)
     total = 0
-    for i in range(du_all.shape[1]):
-        total += min(plane_value(flat, base[h, i], shift[h], plane_width[h], width, height,
-                                 u + pad + du_all[row, i], v + pad + dv_all[row, i]), parent[i])
+    for i in range(tables.du.shape[1]):
+        total += min(plane_value(planes, tables.base[h, i], h, u + planes.pad + tables.du[row, i],
+                                 v + planes.pad + tables.dv[row, i]), parent[i])
         if total + parent_rest[i + 1] < floor:
             return total
     return total
 
 
 @njit(cache=True, nogil=True)
-def node_bounds(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, tu, tv, ta, h):
+def node_bounds(planes, tables, tu, tv, ta, h):
     """The bounds of nodes (tu, tv, ta) at level h: the sums of their points' terms."""
     out = np.empty(len(tu), np.int64)
-    terms = np.empty(du_all.shape[1], np.int64)
+    terms = np.empty(tables.du.shape[1], np.int64)
     for k in range(len(tu)):
-        point_values(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height,
-                     tu[k], tv[k], ta[k], h, terms)
+        point_values(planes, tables, tu[k], tv[k], ta[k], h, terms)
         out[k] = terms.sum()
     return out
 
@@ -80,9 +92,8 @@ def node_bounds(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, 
 # thread's expansions took twice as long).
 PAD = 16
 
-# The pending nodes: a binary max-heap in arrays. heapq on a numba typed List costs
-# ~1.5 us per push or pop (every item access is a call into the list's C code), which
-# was ~40% of a search; these take ~0.1 us. keys[k] = bound x 8 + 7 - level: the highest
+# The pending nodes: a binary max-heap in arrays (heapq on a numba typed List costs
+# ~1.5 us per push or pop; these ~0.1 us). keys[k] = bound x 8 + 7 - level: the highest
 # bound first, the deeper node first among equal bounds (reaching leaves sooner raises
 # the pruning threshold sooner). nodes[k] = (level, u, v, a). size[0]: the heap's size.
 @njit(cache=True, nogil=True, inline='always')
@@ -171,25 +182,24 @@ def split_heap(keys, nodes, size):
 
 
 @njit(cache=True, nogil=True)
-def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_all, row_start, shift, plane_width,
-                pad, width, height, map_w, map_h, n_angles, keep, heap, shared_best, budget, per_level):
+def search_step(planes, tables, free, space, heap, shared_best, budget, per_level):
     """Resume the best-first search for at most `budget` expansions.
 
     heap: the pending nodes, (keys, nodes, size) as make_heap returns them. shared_best[0]:
     the best leaf score any thread's search has found (read before each expansion,
     raised when this one finds better; a stale read only prunes less). Best first
     expands no node whose bound is below the best leaf, so it expands the fewest nodes
-    any search with these bounds can (a depth-first walk wanders through whole subtrees under a low early
-    threshold). Every node whose bound reaches keep x best is expanded; the search is
-    over when the top of the heap is below that. Leaves (level 0, exact scores)
-    reaching keep x best when scored are returned; the caller prunes them by the final
-    threshold. Counts expansions per level into per_level.
+    any search with these bounds can. Every node whose bound reaches keep x best is
+    expanded; the search is over when the top of the heap is below that. Leaves (level 0,
+    exact scores) reaching keep x best when scored are returned; the caller prunes them
+    by the final threshold. Counts expansions per level into per_level.
     Returns (expansions, done, leaves (m, 4): u, v, a, score, heap).
     """
     keys, nodes, size = heap
+    keep = space.keep
     leaves = np.empty((64, 4), np.int64)
     n_leaves = 0
-    n_points = du_all.shape[1]
+    n_points = tables.du.shape[1]
     parent = np.empty(n_points, np.int64)
     parent_rest = np.zeros(n_points + 1, np.int64)     # parent_rest[i]: sum of parent[i:]
     best = shared_best[0]
@@ -204,7 +214,7 @@ def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_al
         _, h, u, v, a = heap_pop(keys, nodes, size)
         expanded += 1
         per_level[h] += 1
-        point_values(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height, u, v, a, h, parent)
+        point_values(planes, tables, u, v, a, h, parent)
         for i in range(n_points - 1, -1, -1):
             parent_rest[i] = parent_rest[i + 1] + parent[i]
         half = 1 << (h - 1)
@@ -212,12 +222,11 @@ def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_al
             cu = u + (c & 1) * half
             cv = v + ((c >> 1) & 1) * half
             ca = a + ((c >> 2) & 1) * half
-            if cu >= map_w or cv >= map_h or ca >= n_angles:
+            if cu >= space.map_w or cv >= space.map_h or ca >= space.n_angles:
                 continue
-            if free_blocks[free_offsets[h - 1] + (cv >> (h - 1)) * free_width[h - 1] + (cu >> (h - 1))] == 0:
+            if free.flags[free.offsets[h - 1] + (cv >> (h - 1)) * free.width[h - 1] + (cu >> (h - 1))] == 0:
                 continue
-            cb = child_bound(flat, base, du_all, dv_all, row_start, shift, plane_width, pad, width, height,
-                             cu, cv, ca, h - 1, parent, parent_rest, int(math.ceil(keep * best)))
+            cb = child_bound(planes, tables, cu, cv, ca, h - 1, parent, parent_rest, int(math.ceil(keep * best)))
             if h == 1:      # a leaf: its exact score
                 if cb > best:
                     best = cb
@@ -241,80 +250,29 @@ def search_step(flat, free_blocks, free_offsets, free_width, base, du_all, dv_al
 @njit(cache=True, nogil=True)
 def offset_tables(theta, px, py):
     """Cell offsets (du, dv) of the points (px, py, laser frame, in cells) rotated by
-    each angle of theta: rows of the tables node_bound reads. dv: rows grow downwards."""
+    each angle of theta: the rows of ScanTables."""
     du = np.empty((len(theta), len(px)), np.int32)
     dv = np.empty((len(theta), len(px)), np.int32)
     for r in range(len(theta)):
         c, s = math.cos(theta[r]), math.sin(theta[r])
         for i in range(len(px)):
-            du[r, i] = round(c * px[i] - s * py[i])
-            dv[r, i] = round(-(s * px[i] + c * py[i]))
+            x, y = image_point(0.0, 0.0, c, s, px[i], py[i])
+            du[r, i] = round(x)
+            dv[r, i] = round(y)
     return du, dv
 
 
-@njit(cache=True, nogil=True)
-def field_means(field, poses, px, py):
-    """Per pose (u, v, yaw: continuous pixel position, grid-frame heading): the mean of
-    the field, bilinearly interpolated (zero outside the map), at the points (px, py,
-    laser frame, in cells). The refinement's and the covariance's score."""
-    height, width = field.shape
-    out = np.empty(poses.shape[0])
-    for k in range(poses.shape[0]):
-        c, s = math.cos(poses[k, 2]), math.sin(poses[k, 2])
-        total = 0.0
-        for i in range(len(px)):
-            x = poses[k, 0] + c * px[i] - s * py[i]
-            y = poses[k, 1] - (s * px[i] + c * py[i])
-            x0, y0 = math.floor(x), math.floor(y)
-            fx, fy = x - x0, y - y0
-            ix, iy = int(x0), int(y0)
-            for dy in range(2):
-                for dx in range(2):
-                    xx, yy = ix + dx, iy + dy
-                    if 0 <= xx < width and 0 <= yy < height:
-                        total += field[yy, xx] * (fx if dx else 1.0 - fx) * (fy if dy else 1.0 - fy)
-        out[k] = total / max(len(px), 1)
-    return out
-
-
-@njit(cache=True, nogil=True)
-def see_through(occupied, poses, angles, lengths):
-    """Per pose (u, v, yaw: pixel position, grid-frame heading): how many of the rays
-    (laser-frame angles, lengths in cells) pass an occupied cell. Walks each ray in
-    half-cell steps from the laser and stops at the first occupied cell."""
-    height, width = occupied.shape
-    out = np.zeros(poses.shape[0], np.int64)
-    for k in range(poses.shape[0]):
-        for i in range(len(angles)):
-            c = math.cos(poses[k, 2] + angles[i])
-            s = math.sin(poses[k, 2] + angles[i])
-            t = 0.5
-            while t < lengths[i]:
-                x = int(round(poses[k, 0] + c * t))
-                y = int(round(poses[k, 1] - s * t))     # rows grow downwards
-                if 0 <= x < width and 0 <= y < height and occupied[y, x]:
-                    out[k] += 1
-                    break
-                t += 0.5
-    return out
-
-
 def warm_up() -> None:
-    """Compile (or load from numba's cache) every kernel on a tiny problem, so a server
-    pays it at start-up rather than in its first goal."""
-    grids = np.zeros((1, 4, 4), np.uint8)
-    free = np.ones((2, 4, 4), np.uint8)
-    base = np.zeros((2, 1), np.int64)
-    du = np.zeros((3, 1), np.int32)
-    row_start = np.array([0, 2], np.int64)
-    top = np.zeros((1, 4), np.int64)
+    """Compile (or load from numba's cache) the search kernels on a tiny problem, so a
+    server pays it at start-up rather than in its first goal."""
     zeros = np.zeros(2, np.int64)
     widths = np.full(2, 4, np.int64)
-    node_bounds(grids.ravel(), base, du, du, row_start, zeros, widths, 0, 4, 4, top[:, 0], top[:, 1], top[:, 2], 1)
-    search_step(grids.ravel(), free.ravel(), zeros, widths, base, du, du, row_start, zeros, widths, 0, 4, 4,
-                2, 2, 2, 0.9, make_heap(top, 1), np.zeros(1, np.int64), 10,
-                np.zeros(2, np.int64))
+    planes = Planes(np.zeros(16, np.uint8), zeros, widths, 0, 4, 4)
+    du = np.zeros((3, 1), np.int32)
+    tables = ScanTables(np.zeros((2, 1), np.int64), du, du, np.array([0, 2], np.int64))
+    top = np.zeros((1, 4), np.int64)
+    node_bounds(planes, tables, top[:, 0], top[:, 1], top[:, 2], 1)
+    search_step(planes, tables, FreeBlocks(np.ones(32, np.uint8), zeros, widths), SearchSpace(2, 2, 2, 0.9),
+                make_heap(top, 1), np.zeros(1, np.int64), 10, np.zeros(2, np.int64))
     split_heap(*make_heap(top, 1))
-    see_through(grids[0], np.zeros((1, 3)), np.zeros(1), np.ones(1))
     offset_tables(np.zeros(1), np.zeros(1), np.zeros(1))
-    field_means(np.zeros((2, 2), np.float32), np.zeros((1, 3)), np.zeros(1), np.zeros(1))

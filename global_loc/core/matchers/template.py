@@ -11,12 +11,16 @@ import math
 import cv2
 import numpy as np
 
-from ..local_grid import build_local_grid
+from ..local_grid import build_local_grid, soften
 from ..pose import pose_from_match, rotation_px, translation_px
-from .base import Candidate, Matcher
+from .base import Candidate, Match, Matcher
 
 
 class RotatedTemplateMatcher(Matcher):
+    """`blur`: soften map and template alike. TM_SQDIFF_NORMED needs it: on unblurred
+    lines nearly every placement saturates at OpenCV's clamp of 1 (0/20 right on the
+    office map, 3/20 with it); TM_CCOEFF_NORMED does better without (18/20 vs 14/20)."""
+
     def __init__(self, occupancy_map, cv_method: int, name: str, min_score: float, blur: bool):
         super().__init__(occupancy_map)
         self.blur = soften if blur else (lambda image: image)
@@ -46,15 +50,7 @@ class RotatedTemplateMatcher(Matcher):
             if progress:
                 progress((i + 1) / len(angles), float(best))
         candidates.sort(key=lambda c: -c.score)
-        return candidates
-
-
-def soften(image: np.ndarray) -> np.ndarray:
-    """A one-cell Gaussian blur, applied alike to map and template, so that one-pixel lines
-    a sub-cell apart (rasterization, rotation) still overlap. SQDIFF_NORMED needs it: on
-    unblurred lines nearly every placement saturates at OpenCV's clamp of 1 (0/20 right on
-    the office map, 3/20 with it). CCOEFF_NORMED does better without (18/20 vs 14/20)."""
-    return cv2.GaussianBlur(image, (5, 5), 1.0)
+        return Match(candidates)
 
 
 def rotate_tight(image: np.ndarray, angle_deg: float):

@@ -1,4 +1,4 @@
-"""The pipeline: scan -> points -> matcher -> distinct hypotheses -> base pose, result.
+"""The pipeline: scan -> points -> matcher -> distinct hypotheses -> verdict -> base pose.
 
 `Localizer` holds one map and the matchers built for it (each built on first use and
 kept, so a server pays a matcher's precomputation once). The ROS server, the CLI and
@@ -14,10 +14,18 @@ from typing import Optional
 import numpy as np
 
 from .map_io import OccupancyMap
-from .matchers import MatchOptions, make_matcher, resolve_method
+from .matchers import BranchAndBoundOptions, MatchOptions, make_matcher, resolve_method
 from .matchers.base import ProgressFn, distinct
+from .outcome import Outcome
 from .scan import Scan, ScanPoints, scan_to_points
 from .transform import Rigid2D, covariance_of_composition
+
+
+def check_angle_step(angle_step_deg: float) -> float:
+    """The rotated-template matcher's Δα must lie in (0, 180] degrees; ValueError otherwise."""
+    if not (0 < angle_step_deg <= 180):
+        raise ValueError(f'angle step must be in (0, 180] degrees, got {angle_step_deg}')
+    return angle_step_deg
 
 
 @dataclass
@@ -29,10 +37,11 @@ class LocalizerConfig:
     num_hypotheses: int = 5                # distinct hypotheses returned
     hypothesis_min_distance: float = 1.0   # m: closer poses ...
     hypothesis_min_angle_deg: float = 20.0  # ... with closer headings are one hypothesis
-    # Fixed covariance (thesis §3.1); defaults are AMCL's initial_cov_{xx,yy,aa}.
+    # Fixed covariance of the thesis matchers (thesis §3.1); defaults are AMCL's initial_cov_{xx,yy,aa}.
     covariance_xy: float = 0.25            # m^2
     covariance_yaw: float = 0.0685         # rad^2 ((15 deg)^2)
     base_T_laser: Rigid2D = field(default_factory=Rigid2D)   # laser mounting on the robot base
+    bnb: BranchAndBoundOptions = field(default_factory=BranchAndBoundOptions)
 
 
 @dataclass
@@ -43,7 +52,7 @@ class Hypothesis:
 
 @dataclass
 class LocalizationResult:
-    success: bool
+    outcome: Outcome
     message: str
     method: str
     pose: Optional[Rigid2D] = None          # best hypothesis (base in map frame)
@@ -53,6 +62,10 @@ class LocalizationResult:
     hypotheses: list = field(default_factory=list)
     time_s: float = 0.0
     dropped: dict = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        return self.outcome == Outcome.LOCALIZED
 
 
 class Localizer:
@@ -65,15 +78,16 @@ class Localizer:
         """The matcher for `method`, built (precomputed for this map) on first use."""
         name = resolve_method(method)
         if name not in self._matchers:
-            self._matchers[name] = make_matcher(name, self.map)
+            self._matchers[name] = make_matcher(name, self.map, self.config.bnb)
         return self._matchers[name]
 
     def localize(self, scan: Scan, method: Optional[str] = None, angle_step_deg: Optional[float] = None,
                  progress: Optional[ProgressFn] = None, base_T_laser: Optional[Rigid2D] = None
                  ) -> LocalizationResult:
         """Localize one scan. Raises ScanError for an unusable scan, MethodError for an
-        unknown method and Cancelled if `progress` raises it; otherwise returns a result,
-        successful or not. `base_T_laser` overrides the config's laser mounting."""
+        unknown method, ValueError for a bad angle step and Cancelled if `progress` raises
+        it; otherwise returns a result, successful or not. `base_T_laser` overrides the
+        config's laser mounting."""
         t0 = time.perf_counter()
         return self.localize_points(scan_to_points(scan), method, angle_step_deg, progress, base_T_laser, t0)
 
@@ -84,30 +98,19 @@ class Localizer:
         cfg = self.config
         t0 = time.perf_counter() if t0 is None else t0
         matcher = self.matcher(method or cfg.method)
-        options = MatchOptions(angle_step_deg=angle_step_deg or cfg.angle_step_deg,
+        options = MatchOptions(angle_step_deg=check_angle_step(angle_step_deg or cfg.angle_step_deg),
                                opening_kernel=cfg.opening_kernel)
-        if not (0 < options.angle_step_deg <= 180):
-            raise ValueError(f'angle step must be in (0, 180] degrees, got {options.angle_step_deg}')
-        candidates = matcher.match(points, options, progress)
-        best = distinct(candidates, cfg.num_hypotheses, cfg.hypothesis_min_distance,
+        found = matcher.match(points, options, progress)
+        best = distinct(found.candidates, cfg.num_hypotheses, cfg.hypothesis_min_distance,
                         math.radians(cfg.hypothesis_min_angle_deg))
+        verdict = matcher.judge(best, found.stats)
         laser_T_base = (base_T_laser or cfg.base_T_laser).inverse()
         hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in best]
-        elapsed = time.perf_counter() - t0
-        result = LocalizationResult(False, '', matcher.name, time_s=elapsed, dropped=points.dropped,
-                                    hypotheses=hyps,
+        result = LocalizationResult(verdict.outcome, verdict.message, matcher.name, confidence=verdict.confidence,
+                                    hypotheses=hyps, time_s=time.perf_counter() - t0, dropped=points.dropped,
                                     covariance=np.diag([cfg.covariance_xy, cfg.covariance_xy, cfg.covariance_yaw]))
-        verdict = matcher.judge(best)
-        result.success, result.confidence, result.message = verdict.success, verdict.confidence, verdict.message
-        if not hyps:
-            return result
-        result.pose, result.score = hyps[0].pose, hyps[0].score
-        if best[0].covariance is not None:
-            result.covariance = covariance_of_composition(best[0].laser_pose, best[0].covariance, laser_T_base)
+        if hyps:
+            result.pose, result.score = hyps[0].pose, hyps[0].score
+            if best[0].covariance is not None:
+                result.covariance = covariance_of_composition(best[0].laser_pose, best[0].covariance, laser_T_base)
         return result
-
-
-def pose_error(estimate: Rigid2D, truth: Rigid2D) -> tuple[float, float]:
-    """(metres, degrees) between two poses."""
-    d, a = estimate.distance_to(truth)   # a: already the absolute wrapped difference
-    return d, math.degrees(a)

@@ -6,9 +6,10 @@ The laser pose in the map frame is then
 
     map_T_laser = map.origin * G_map * A * G_local^-1 * local.grid_T_laser()
 
-where G_* converts an image's pixels to its grid frame (metres, y up). A rotation by
-+a in pixel coordinates (y down) is a rotation by -a in the grid frame; composing the
-matrices takes care of that and of crops, canvas growth and map-origin yaw at once.
+where G_* converts an image's pixels to its grid frame (GridFrame.pixel_to_grid_matrix).
+A rotation by +a in pixel coordinates (y down) is a rotation by -a in the grid frame;
+composing the matrices takes care of that and of crops, canvas growth and map-origin yaw
+at once.
 """
 from __future__ import annotations
 
@@ -19,13 +20,6 @@ import numpy as np
 from .local_grid import LocalGrid
 from .map_io import OccupancyMap
 from .transform import Rigid2D
-
-
-def pixel_to_grid_matrix(height: int, resolution: float) -> np.ndarray:
-    """3x3 affine: continuous pixel (u, v) of an image `height` rows tall -> grid metres."""
-    return np.array([[resolution, 0.0, 0.5 * resolution],
-                     [0.0, -resolution, (height - 0.5) * resolution],
-                     [0.0, 0.0, 1.0]])
 
 
 def translation_px(du: float, dv: float) -> np.ndarray:
@@ -58,7 +52,7 @@ def pose_from_match(occupancy_map: OccupancyMap, local: LocalGrid, local_to_map_
     a = a.copy()
     a[:2, :2] /= scale
     a[:2, 2] = target[:2] - a[:2, :2] @ laser[:2]
-    g_map = pixel_to_grid_matrix(occupancy_map.height, occupancy_map.resolution)
-    g_local = pixel_to_grid_matrix(local.height, local.resolution)
+    g_map = occupancy_map.frame.pixel_to_grid_matrix()
+    g_local = local.frame.pixel_to_grid_matrix()
     grid_T_localgrid = Rigid2D.from_matrix(g_map @ a @ np.linalg.inv(g_local))
     return occupancy_map.origin * grid_T_localgrid * local.grid_T_laser()

@@ -13,9 +13,9 @@ import math
 import cv2
 import numpy as np
 
-from ..local_grid import build_local_grid
+from ..local_grid import build_local_grid, soften
 from ..pose import pose_from_match
-from .base import Candidate, Matcher, MethodError
+from .base import Candidate, Match, Matcher, MethodError
 
 FLANN_INDEX_KDTREE = 1
 FLANN_INDEX_LSH = 6
@@ -49,11 +49,6 @@ def make_detector(name: str):
     raise MethodError(f'unknown feature detector {name!r}; known: surf, orb, sift, akaze')
 
 
-def feature_image(obstacles: np.ndarray) -> np.ndarray:
-    """Detectors want gradients, not one-pixel dots: blur the obstacle image slightly."""
-    return cv2.GaussianBlur(obstacles, (5, 5), 1.0)
-
-
 class FeatureMatcher(Matcher):
     min_score = 8           # inliers
     ratio = 0.8             # Lowe's ratio test
@@ -65,7 +60,7 @@ class FeatureMatcher(Matcher):
         self.name = f'features_{detector_name}'
         self.detector, binary = make_detector(detector_name)
         self.keypoints, self.descriptors = self.detector.detectAndCompute(
-            feature_image(occupancy_map.surface_image()), None)
+            soften(occupancy_map.surface_image()), None)
         if binary:
             index = dict(algorithm=FLANN_INDEX_LSH, table_number=6, key_size=12, multi_probe_level=1)
         else:
@@ -78,11 +73,11 @@ class FeatureMatcher(Matcher):
 
     def match(self, points, options, progress=None):
         local = build_local_grid(points, self.map.resolution, options.opening_kernel)
-        kps, desc = self.detector.detectAndCompute(feature_image(local.image), None)
+        kps, desc = self.detector.detectAndCompute(soften(local.image), None)
         if progress:
             progress(0.3, 0.0)
         if desc is None or len(kps) < 3 or len(self.keypoints) < 3:
-            return []
+            return Match([])
         pairs = self.flann.knnMatch(desc, k=2)
         good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < self.ratio * p[1].distance]
         src = np.float32([kps[m.queryIdx].pt for m in good]).reshape(-1, 2)
@@ -104,4 +99,4 @@ class FeatureMatcher(Matcher):
         if progress:
             progress(1.0, candidates[0].score if candidates else 0.0)
         candidates.sort(key=lambda c: -c.score)
-        return candidates
+        return Match(candidates)

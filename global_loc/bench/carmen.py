@@ -15,9 +15,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .map_io import FREE, OCCUPIED, UNKNOWN, OccupancyMap
-from .scan import Scan
-from .transform import Rigid2D
+from ..core.grid_frame import GridFrame
+from ..core.map_io import FREE, OCCUPIED, UNKNOWN, OccupancyMap, make_map
+from ..core.scan import Scan, polar_to_points
+from ..core.transform import Rigid2D
 
 
 @dataclass
@@ -64,38 +65,32 @@ class GridCounts:
         return GridCounts(self.hits + other.hits, self.visits + other.visits)
 
 
-class GridFrame:
-    """The common grid of a log's maps: bounds from all poses and end points, + margin."""
+class LogGrid:
+    """The common grid of a log's maps (bounds from all poses and end points, + margin)
+    and how scans are counted on it."""
 
     def __init__(self, records: list[LaserRecord], resolution: float, margin: float = 2.0, max_free: float = 15.0):
         pts = np.vstack([r.pose.apply(_endpoints(r.scan)[0]) for r in records[::5]] +
                         [np.array([[r.pose.x, r.pose.y] for r in records])])
         lo, hi = pts.min(axis=0) - margin, pts.max(axis=0) + margin
-        self.resolution = resolution
-        self.origin = Rigid2D(float(lo[0]), float(lo[1]), 0.0)
-        self.width = int(math.ceil((hi[0] - lo[0]) / resolution))
-        self.height = int(math.ceil((hi[1] - lo[1]) / resolution))
+        self.frame = GridFrame(resolution, int(math.ceil((hi[0] - lo[0]) / resolution)),
+                               int(math.ceil((hi[1] - lo[1]) / resolution)), Rigid2D(float(lo[0]), float(lo[1]), 0.0))
         self.max_free = max_free
 
-    def to_pixels(self, xy: np.ndarray) -> np.ndarray:
-        """World points -> integer (col, row), row 0 at the top."""
-        col = np.floor((xy[:, 0] - self.origin.x) / self.resolution).astype(int)
-        row = self.height - 1 - np.floor((xy[:, 1] - self.origin.y) / self.resolution).astype(int)
-        return np.stack([col, row], axis=1)
-
     def counts(self, records: list[LaserRecord]) -> GridCounts:
-        hits = np.zeros((self.height, self.width), np.int32)
-        visits = np.zeros((self.height, self.width), np.int32)
+        f = self.frame
+        hits = np.zeros((f.height, f.width), np.int32)
+        visits = np.zeros((f.height, f.width), np.int32)
         for rec in records:
             points, no_return_points = _endpoints(rec.scan, self.max_free)
-            end = self.to_pixels(rec.pose.apply(points))
-            inside = (end[:, 0] >= 0) & (end[:, 0] < self.width) & (end[:, 1] >= 0) & (end[:, 1] < self.height)
+            end = f.cell_of(rec.pose.apply(points))
+            inside = f.contains(end)
             np.add.at(hits, (end[inside, 1], end[inside, 0]), 1)
             # The area a scan saw as free: the polygon laser -> beam ends (no-return beams
             # count as free out to max_free), filled in a window around the scan.
-            poly = self.to_pixels(np.vstack([[rec.pose.x, rec.pose.y], rec.pose.apply(no_return_points)]))
+            poly = f.cell_of(np.vstack([[rec.pose.x, rec.pose.y], rec.pose.apply(no_return_points)]))
             c0, r0 = np.maximum(poly.min(axis=0), 0)
-            c1, r1 = np.minimum(poly.max(axis=0) + 1, [self.width, self.height])
+            c1, r1 = np.minimum(poly.max(axis=0) + 1, [f.width, f.height])
             if c1 <= c0 or r1 <= r0:
                 continue
             window = np.zeros((r1 - r0, c1 - c0), np.uint8)
@@ -107,38 +102,35 @@ class GridFrame:
         """Occupied where a cell was hit at least twice and in at least a fifth of the
         scans that saw it (people walking by are hit once or twice among many visits);
         free where seen otherwise; unknown where never seen."""
-        occ = np.full((self.height, self.width), UNKNOWN, np.int8)
+        occ = np.full((self.frame.height, self.frame.width), UNKNOWN, np.int8)
         occ[counts.visits > 0] = FREE
         occupied = (counts.hits >= 2) & (counts.hits * 5 >= counts.visits)
         occ[occupied] = OCCUPIED
-        return OccupancyMap(occ, self.resolution, self.origin, source)
+        return make_map(occ, self.frame.resolution, self.frame.origin, source)
 
 
 def _endpoints(scan: Scan, max_free: float = 15.0):
     """(valid end points, polygon points with no-return and long beams capped at max_free),
     both in the laser frame."""
     r = np.asarray(scan.ranges, dtype=float)
-    a = scan.angle_min + scan.angle_increment * np.arange(len(r))
+    a = scan.angles()
     valid = np.isfinite(r) & (r > scan.range_min) & (r < scan.range_max)
-    hit_pts = np.stack([r[valid] * np.cos(a[valid]), r[valid] * np.sin(a[valid])], axis=1)
     capped = np.where(valid, np.minimum(r, max_free), max_free)
-    poly_pts = np.stack([capped * np.cos(a), capped * np.sin(a)], axis=1)
-    return hit_pts, poly_pts
+    return polar_to_points(r[valid], a[valid]), polar_to_points(capped, a)
 
 
 def explained_fraction(occupancy_map: OccupancyMap, record: LaserRecord, cells: float = 2.0) -> float:
     """Fraction of the scan's returns that lie within `cells` cells of an occupied cell
     of the map at the reference pose (a scan the map cannot explain tests mapping)."""
-    dist = cv2.distanceTransform((~occupancy_map.occupied).astype(np.uint8), cv2.DIST_L2, 5)
-    return _explained(occupancy_map, dist, record, cells)
+    return _explained(occupancy_map, occupancy_map.distance_to_occupied(), record, cells)
 
 
 def _explained(occupancy_map, dist, record, cells):
     pts, _ = _endpoints(record.scan)
     if len(pts) == 0:
         return 0.0
-    uv = np.rint(occupancy_map.world_to_pixel(record.pose.apply(pts))).astype(int)
-    inside = (uv[:, 0] >= 0) & (uv[:, 0] < occupancy_map.width) & (uv[:, 1] >= 0) & (uv[:, 1] < occupancy_map.height)
+    uv = occupancy_map.frame.cell_of(record.pose.apply(pts))
+    inside = occupancy_map.frame.contains(uv)
     near = np.zeros(len(uv), bool)
     near[inside] = dist[uv[inside, 1], uv[inside, 0]] <= cells
     return float(near.mean())
@@ -150,7 +142,7 @@ class HeldOutScan:
     fold: int
 
 
-def held_out_folds(records: list[LaserRecord], frame: GridFrame, folds: int = 5, min_explained: float = 0.7):
+def held_out_folds(records: list[LaserRecord], frame: LogGrid, folds: int = 5, min_explained: float = 0.7):
     """Split the log into `folds` time blocks; for each, the map from all *other* blocks
     and the block's scans that pass both filters (pose on mapped free space; at least
     `min_explained` of returns within two cells of a mapped wall).
@@ -166,7 +158,7 @@ def held_out_folds(records: list[LaserRecord], frame: GridFrame, folds: int = 5,
         others = GridCounts(total.hits - per_fold[k].hits, total.visits - per_fold[k].visits)
         m = frame.occupancy_map(others, f'held-out fold {k}')
         maps[k] = m
-        dist = cv2.distanceTransform((~m.occupied).astype(np.uint8), cv2.DIST_L2, 5)
+        dist = m.distance_to_occupied()
         for i in block:
             rec = records[i]
             if not m.is_free_at([[rec.pose.x, rec.pose.y]])[0]:

@@ -1,0 +1,107 @@
+"""Per map, built once: the likelihood field and the max-pooled planes the search's
+bounds read, and which blocks of the map hold a free cell (Cartographer's
+PrecomputationGridStack2D). The search only reads them."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from ...map_io import OccupancyMap
+from .kernels import FreeBlocks, Planes
+from .options import BranchAndBoundOptions
+
+MARGINS = (0, 1, 2, 3, 5, 9, 17, 33)   # widenings (cells) for which grids are kept
+PLANE_SHIFT_FROM = 3                   # planes of level h > this are stored at 1 / 2^(h - this)
+                                       # resolution (see PrecomputationGridStack)
+
+
+class PrecomputationGridStack:
+    """Per map, built once: the likelihood field; per level and widening a uint8 plane
+    whose cell holds the field's maximum over the block starting there and the widening
+    around it (`grid_ids` picks one per point); per level, whether each block holds a
+    free cell. Memory: `nbytes`.
+
+    The search is bound by memory latency (a node reads ~200 scattered cells), so the
+    planes are kept small: a level-h plane (windows of 2^h cells and more) is stored at
+    1 / 2^shift[h] of the map's resolution, each stored cell the maximum over the
+    2^shift x 2^shift cells it stands for. That widens each window by under 2^shift
+    cells - a looser but still valid bound - and divides the memory the upper levels
+    read by 4^shift. All planes are one flat array (`flat`, plane k from offsets[k]),
+    read by the kernels through `planes` (kernels.Planes) as
+    flat[offsets[k] + (y >> shift[h]) * plane_width[h] + (x >> shift[h])]."""
+
+    def __init__(self, occupancy_map: OccupancyMap, options: BranchAndBoundOptions):
+        self.options = options
+        top = options.levels - 1
+        # The widest plane must cover the top level's heading spread (else its bounds would
+        # not be bounds), and the kernel's heap keys hold the level in 3 bits.
+        most = max(n for n in range(1, 9) if self.margin(n - 1) <= MARGINS[-1])
+        if not 1 <= options.levels <= most:
+            raise ValueError(f'bnb levels must be 1 .. {most}, got {options.levels}')
+        occupied = occupancy_map.occupied
+        self.occupied = occupied.astype(np.uint8)     # for the free-space check
+        dist = occupancy_map.distance_to_occupied()
+        self.field = np.exp(-(dist.astype(np.float32) ** 2) / (2.0 * options.sigma_cells ** 2))
+        p = (2 ** top) + 2 * int(self.margin(top)) + 2
+        shift = np.array([max(0, h - PLANE_SHIFT_FROM) for h in range(options.levels)], np.int64)
+        unit = 2 ** int(shift.max())
+        # padded so that every plane's size divides evenly
+        height, width = (-(-(n + 2 * p) // unit) * unit for n in occupied.shape)
+        base = np.zeros((height, width), np.uint8)
+        base[p:p + occupied.shape[0], p:p + occupied.shape[1]] = np.rint(self.field * 255).astype(np.uint8)
+        self.index: dict[tuple[int, int], int] = {}
+        for h in range(options.levels):
+            for m in MARGINS:
+                self.index[h, m] = len(self.index)
+                if m >= self.margin(h):
+                    break
+        planes, plane = [], np.empty_like(base)
+        for (h, m), i in self.index.items():
+            k = 2 ** int(shift[h])
+            # dilate's window at (x, y) spans [x - anchor, x - anchor + size): the block and m
+            # around it, and the k - 1 cells after it that the stored cell (x, y) also stands for
+            size = 2 ** h + 2 * m + k - 1
+            cv2.dilate(base, np.ones((size, size), np.uint8), dst=plane, anchor=(m, m))
+            planes.append(plane[::k, ::k].flatten())     # a copy: plane is reused
+        self.offsets = np.cumsum([0] + [len(q) for q in planes[:-1]]).astype(np.int64)
+        self.planes = Planes(np.concatenate(planes), shift, np.array([width >> int(s) for s in shift], np.int64),
+                             p, width, height)
+        # free_blocks: per level h, block (u >> h, v >> h) of the map holds a free cell
+        free = occupancy_map.free
+        free_offsets, free_width, blocks = [], [], []
+        for h in range(options.levels):
+            k = 2 ** h
+            rows, cols = -(-free.shape[0] // k), -(-free.shape[1] // k)
+            padded = np.zeros((rows * k, cols * k), bool)
+            padded[:free.shape[0], :free.shape[1]] = free
+            free_offsets.append(sum(len(b) for b in blocks))
+            free_width.append(cols)
+            blocks.append(padded.reshape(rows, k, cols, k).any(axis=(1, 3)).astype(np.uint8).ravel())
+        self.free = FreeBlocks(np.concatenate(blocks), np.array(free_offsets, np.int64),
+                               np.array(free_width, np.int64))
+        self.nbytes = self.field.nbytes + self.planes.flat.nbytes + self.free.flags.nbytes + self.occupied.nbytes
+
+    def free_block(self, level: int, u, v):
+        """Whether the level's blocks starting at map cells (u, v) hold a free cell."""
+        f = self.free
+        return f.flags[f.offsets[level] + (np.asarray(v) >> level) * f.width[level] + (np.asarray(u) >> level)] > 0
+
+    @staticmethod
+    def margin(level: int, range_fraction=1.0):
+        """Cells a point at range_fraction x r_max may move within a level-`level` node's
+        2^level angles (about the middle one), plus one of rounding. range_fraction may
+        be an array (one per point)."""
+        if level == 0:
+            return np.zeros_like(range_fraction, dtype=int)
+        return np.ceil((2 ** level - 1) / 2.0 * np.asarray(range_fraction) + 1e-3).astype(int) + 1
+
+    def grid_ids(self, ranges: np.ndarray, r_max: float) -> np.ndarray:
+        """(levels, points): the grid each point reads at each level, the one widened
+        just enough for the point's range."""
+        out = np.array([[self.index[h, 0]] * len(ranges) for h in range(self.options.levels)], np.int64)
+        for h in range(1, self.options.levels):
+            need = self.margin(h, ranges / r_max)
+            available = np.array([m for m in MARGINS if (h, m) in self.index])
+            use = available[np.searchsorted(available, need)]
+            out[h] = [self.index[h, int(m)] for m in use]
+        return out

@@ -1,0 +1,152 @@
+"""BranchAndBoundMatcher: exact global search over (x, y, yaw) after Cartographer's
+FastCorrelativeScanMatcher2D (Hess et al. 2016), then refinement, the free-space check
+and the verdict - each stage its own module, wired here.
+
+Scoring: the scan's points against a likelihood field of the map (exp(-d^2 / 2 sigma^2)
+of the distance d to the nearest occupied cell). The score of a pose is the field's
+mean over the scan's points, in [0, 1]: about the fraction of the scan the map explains.
+
+Search: leaf poses are the laser on a cell centre at angles k * d0, d0 = acos(1 -
+res^2 / (2 r_max^2)) (a point at the scan's largest range moves at most one cell
+between neighbouring angles). A node at level h covers 2^h x 2^h cells and 2^h angles;
+its bound reads the scan, rotated to the node's middle angle, from planes whose cells
+hold the field's maximum over the block, widened by the rotation's reach for each
+point's own range (grids.py). A bound is never below any leaf under it, so the search,
+expanding best bound first down to keep_ratio x the best leaf (search.py), is exact at
+cell and d0 resolution and finds every pose scoring that high: the hypotheses, and the
+margin behind the confidence. The laser must stand on a free cell of the map.
+"""
+from __future__ import annotations
+
+import math
+from typing import Optional
+
+import numpy as np
+
+from ...map_io import OccupancyMap
+from ...pixel_kernels import warm_up as warm_up_pixel_kernels
+from ...scan import ScanPoints
+from ..base import Candidate, Match, Matcher, MatchOptions, ProgressFn, distinct
+from .free_space import see_through_fractions
+from .grids import PrecomputationGridStack
+from .kernels import ScanTables, SearchSpace, node_bounds, offset_tables
+from .kernels import warm_up as warm_up_search
+from .options import BranchAndBoundOptions
+from .refine import bin_maxima, landscape_covariance, refine
+from .refine import warm_up as warm_up_refine
+from .search import SearchStats, ThreadedSearch, search_threads
+from .verdict import judge
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) every kernel bnb uses."""
+    warm_up_search()
+    warm_up_refine()
+    warm_up_pixel_kernels()
+
+
+class BranchAndBoundMatcher(Matcher):
+    name = 'bnb'
+    min_score = 0.0
+
+    def __init__(self, occupancy_map: OccupancyMap, options: Optional[BranchAndBoundOptions] = None,
+                 slice_expansions: int = 20000):
+        super().__init__(occupancy_map)
+        self.options = options or BranchAndBoundOptions()
+        self.stack = PrecomputationGridStack(occupancy_map, self.options)
+        self.searcher = ThreadedSearch(slice_expansions)
+        warm_up()
+
+    def judge(self, candidates, stats=None):
+        """See verdict.judge."""
+        return judge(candidates, stats, self.options)
+
+    def prepare(self, points: np.ndarray) -> np.ndarray:
+        """One point per cell (voxel filter), at most max_points of them, evenly chosen."""
+        res = self.map.resolution
+        points = points[np.hypot(points[:, 0], points[:, 1]) <= self.options.max_range]
+        keys = np.floor(points / res).astype(np.int64)
+        _, first = np.unique(keys, axis=0, return_index=True)
+        pts = points[np.sort(first)]
+        if len(pts) > self.options.max_points:
+            pts = pts[np.linspace(0, len(pts) - 1, self.options.max_points).astype(int)]
+        return pts
+
+    def tables(self, pts: np.ndarray, d0: float, n_angles: int) -> ScanTables:
+        """What the kernels read for this scan: per level h, the points' cell offsets at
+        the middle angle of each node's angles (rows row_start[h] + a >> h), and where in
+        the flat planes the plane each point reads (grid_ids) starts."""
+        res = self.map.resolution
+        ranges = np.hypot(pts[:, 0], pts[:, 1])
+        gid = self.stack.grid_ids(ranges, max(float(ranges.max()), 1e-9))
+        thetas, row_start = [], []
+        for h in range(self.options.levels):
+            row_start.append(sum(len(t) for t in thetas))
+            size = 2 ** h
+            thetas.append((np.arange(0, n_angles, size) + (size - 1) / 2.0) * d0)
+        du, dv = offset_tables(np.concatenate(thetas), pts[:, 0] / res, pts[:, 1] / res)   # (rows, points)
+        return ScanTables(self.stack.offsets[gid], du, dv, np.array(row_start, np.int64))
+
+    def bounds(self, level: int, tu, tv, ta, pts, d0) -> np.ndarray:
+        """Bounds (level > 0) or exact scores (level 0) of nodes (tu, tv, ta), in [0, 1]."""
+        n_angles = int(round(2 * math.pi / d0))
+        raw = node_bounds(self.stack.planes, self.tables(pts, d0, n_angles), np.asarray(tu, np.int64),
+                          np.asarray(tv, np.int64), np.asarray(ta, np.int64), level)
+        return raw / (255.0 * len(pts))
+
+    def match(self, points: ScanPoints, options: MatchOptions, progress: Optional[ProgressFn] = None) -> Match:
+        opt = self.options
+        pts = self.prepare(points.points)
+        if len(pts) < 3:
+            return Match([])
+        # 1. The leaf angle step, and the top-level nodes on blocks that hold a free cell.
+        res = self.map.resolution
+        r_max = max(float(np.hypot(pts[:, 0], pts[:, 1]).max()), 3 * res)
+        top = opt.levels - 1
+        step = 2 ** top
+        n_angles = int(math.ceil(2 * math.pi / math.acos(1 - res ** 2 / (2 * r_max ** 2)) / step)) * step
+        d0 = 2 * math.pi / n_angles
+        gu, gv, ga = np.meshgrid(np.arange(0, self.map.width, step), np.arange(0, self.map.height, step),
+                                 np.arange(0, n_angles, step), indexing='ij')
+        tu, tv, ta = gu.ravel(), gv.ravel(), ga.ravel()
+        keep = self.stack.free_block(top, tu, tv)
+        tu, tv, ta = tu[keep], tv[keep], ta[keep]
+        if len(tu) == 0:
+            return Match([])
+        # 2. Branch and bound down to keep_ratio x the best leaf.
+        tables = self.tables(pts, d0, n_angles)
+        space = SearchSpace(self.map.width, self.map.height, n_angles, opt.keep_ratio)
+        bounds = node_bounds(self.stack.planes, tables, tu, tv, ta, top)
+        leaves, per_level, exact = self.searcher.run(
+            self.stack.planes, tables, self.stack.free, space,
+            np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, opt.max_nodes, progress)
+        scores = leaves[:, 3] / (255.0 * len(pts))
+        stats = SearchStats(exact=exact, angles=n_angles, points=len(pts), leaves=len(scores),
+                            expansions=int(per_level.sum()), per_level=tuple(per_level.tolist()), top_nodes=len(tu),
+                            threads=search_threads(), best_leaf=float(scores.max()) if len(scores) else 0.0)
+        # 3. Peaks, refined, checked for free space, ranked.
+        candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], scores, pts, d0, points)
+        if progress:
+            progress(1.0, candidates[0].score if candidates else 0.0)
+        return Match(candidates, stats)
+
+    def refine_peaks(self, tu, tv, ta, scores, pts, d0, points: ScanPoints) -> list[Candidate]:
+        """The distinct peaks among the leaves, refined, ranked by field score x (1 -
+        see-through share); the best carries the landscape covariance."""
+        opt = self.options
+        frame = self.map.frame
+        leaves = [Candidate(frame.pixel_pose_to_world(float(tu[i]), float(tv[i]), float(ta[i] * d0)),
+                            float(scores[i]))
+                  for i in bin_maxima(tu, tv, ta, scores, d0, self.map.height, opt.distinct_cells, opt.distinct_angle)]
+        peaks = distinct(leaves, opt.hypotheses, opt.distinct_cells * self.map.resolution, opt.distinct_angle)
+        starts = [frame.world_pose_to_pixel(c.laser_pose) for c in peaks]
+        refined = np.array([refine(self.stack.field, u, v, yaw, pts, self.map.resolution)
+                            for u, v, yaw in starts]).reshape(-1, 4)
+        through = see_through_fractions(self.stack.occupied, refined[:, :3], points, self.map.resolution, opt)
+        rank = refined[:, 3] * (1.0 - through)
+        order = np.argsort(-rank, kind='stable')
+        out = [Candidate(frame.pixel_pose_to_world(*refined[i, :3]), float(rank[i]), explained=float(refined[i, 3]),
+                         see_through=float(through[i])) for i in order]
+        if out:
+            out[0].covariance = landscape_covariance(self.stack.field, frame, *refined[order[0], :3], pts)
+        return out

@@ -1,0 +1,35 @@
+"""The branch-and-bound matcher's options: one dataclass, each field documented once in
+its metadata, from which the server declares its `bnb.*` parameters and the CLI its
+`--bnb-*` flags (`option_fields`)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+
+def _option(default, help_text: str):
+    return field(default=default, metadata={'help': help_text})
+
+
+@dataclass(frozen=True)
+class BranchAndBoundOptions:
+    sigma_cells: float = _option(1.5, 'width of the likelihood field around occupied cells, cells')
+    levels: int = _option(7, 'levels of the search tree: blocks of 1 .. 2^(levels-1) cells (1 .. 7)')
+    max_points: int = _option(240, 'scan points kept after the one-cell voxel filter')
+    max_range: float = _option(30.0, 'm; farther returns are left out (the angle step shrinks with the '
+                                     'largest range, and far returns are the least sure)')
+    keep_ratio: float = _option(0.9, 'nodes bounded above keep_ratio x the best score are explored: every '
+                                     'pose scoring that high is found (the hypotheses, the margin)')
+    max_nodes: int = _option(400000, 'node expansions after which the search stops and says it was not exhaustive')
+    hypotheses: int = _option(8, 'distinct poses refined and returned')
+    distinct_cells: float = _option(16.0, 'poses closer than this many cells (and distinct_angle) are one peak')
+    distinct_angle: float = _option(math.radians(20.0), 'poses closer than this (rad, and distinct_cells) '
+                                                        'are one peak')
+    see_through_tolerance_cells: float = _option(3.0, "a return's beam is checked for walls up to this many "
+                                                      'cells short of its end (noise, grazing beams)')
+    min_confidence: float = _option(0.5, 'confidence (see the verdict) a result needs to be a success')
+
+
+def option_fields():
+    """(name, type, default, help) of every option, in declaration order."""
+    return [(f.name, type(f.default), f.default, f.metadata['help']) for f in fields(BranchAndBoundOptions)]

@@ -1,0 +1,102 @@
+"""From the search's leaves to refined peaks: the best leaf per bin, sub-cell refinement
+on the interpolated likelihood field (Cartographer's CeresScanMatcher2D does this step
+with Ceres; here Nelder-Mead within a cell), and the covariance from the score landscape
+around the chosen peak. Poses here are (u, v, yaw): pixel position and grid-frame heading.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from scipy.optimize import minimize
+
+from ...grid_frame import GridFrame
+from ...pixel_kernels import image_point
+
+
+@njit(cache=True, nogil=True)
+def field_means(field, poses, px, py):
+    """Per pose (u, v, yaw): the mean of the field, bilinearly interpolated (zero outside
+    the map), at the points (px, py, laser frame, in cells)."""
+    height, width = field.shape
+    out = np.empty(poses.shape[0])
+    for k in range(poses.shape[0]):
+        c, s = math.cos(poses[k, 2]), math.sin(poses[k, 2])
+        total = 0.0
+        for i in range(len(px)):
+            x, y = image_point(poses[k, 0], poses[k, 1], c, s, px[i], py[i])
+            x0, y0 = math.floor(x), math.floor(y)
+            fx, fy = x - x0, y - y0
+            ix, iy = int(x0), int(y0)
+            for dy in range(2):
+                for dx in range(2):
+                    xx, yy = ix + dx, iy + dy
+                    if 0 <= xx < width and 0 <= yy < height:
+                        total += field[yy, xx] * (fx if dx else 1.0 - fx) * (fy if dy else 1.0 - fy)
+        out[k] = total / max(len(px), 1)
+    return out
+
+
+def bin_maxima(tu, tv, ta, scores, d0: float, map_height: int, distinct_cells: float, distinct_angle: float,
+               limit: int = 512) -> np.ndarray:
+    """Indices of the best leaf in each bin of distinct_cells^2 cells x distinct_angle,
+    the `limit` best of them, best first. The non-maximum suppression then sees a few
+    hundred poses, not every leaf: a featureless view (a 60 deg glimpse of a straight
+    wall) leaves a million poses within keep_ratio of the best."""
+    cell = max(1, int(distinct_cells))
+    a_bin = max(1, int(distinct_angle / d0))
+    ku, kv, ka = tu // cell, tv // cell, ta // a_bin
+    key = (ku * (map_height // cell + 1) + kv) * (int(ta.max(initial=0)) // a_bin + 1) + ka
+    order = np.argsort(-scores, kind='stable')
+    _, first = np.unique(key[order], return_index=True)
+    best = order[first]
+    return best[np.argsort(-scores[best], kind='stable')][:limit]
+
+
+def one_cell_angle(pts: np.ndarray, resolution: float) -> float:
+    """The turn (rad) that moves the scan's farthest point by one cell (at least a cell
+    from the laser): the refinement's heading unit and the covariance's heading step."""
+    return resolution / max(float(np.hypot(pts[:, 0], pts[:, 1]).max()), resolution)
+
+
+def refine(field: np.ndarray, u: float, v: float, yaw: float, pts: np.ndarray, resolution: float):
+    """Sub-cell pose maximizing the interpolated field (Nelder-Mead within a cell):
+    (u, v, yaw, score)."""
+    px, py = pts[:, 0] / resolution, pts[:, 1] / resolution
+    yaw_unit = one_cell_angle(pts, resolution)
+
+    def cost(z):
+        pose = np.array([[u + z[0], v + z[1], yaw + z[2] * yaw_unit]])
+        return -field_means(field, pose, px, py)[0]
+
+    r = minimize(cost, np.zeros(3), method='Nelder-Mead',
+                 options={'xatol': 0.02, 'fatol': 1e-5, 'initial_simplex': np.array(
+                     [[0, 0, 0], [0.5, 0, 0], [0, 0.5, 0], [0, 0, 0.5]]), 'maxiter': 200})
+    z = r.x if -r.fun >= -cost(np.zeros(3)) else np.zeros(3)
+    return u + z[0], v + z[1], yaw + z[2] * yaw_unit, -cost(z)
+
+
+def landscape_covariance(field: np.ndarray, frame: GridFrame, u: float, v: float, yaw: float, pts: np.ndarray,
+                         half: int = 3) -> np.ndarray:
+    """(x, y, yaw) covariance in the world frame from the score landscape around a peak:
+    scores on a (2 half + 1)^3 grid of cell and one-cell-at-max-range steps, weighted as
+    likelihoods (s / s_max)^N of N independent points, plus the search's own resolution
+    (a uniform cell and angle step: step^2 / 12)."""
+    res = frame.resolution
+    d_yaw = one_cell_angle(pts, res)
+    steps = np.arange(-half, half + 1, dtype=float)
+    du, dv, da = (g.ravel() for g in np.meshgrid(steps, steps, steps * d_yaw, indexing='ij'))
+    poses = np.stack([u + du, v + dv, yaw + da], axis=1)
+    scores = np.maximum(field_means(field, poses, pts[:, 0] / res, pts[:, 1] / res), 1e-9)
+    w = np.exp(len(pts) * (np.log(scores) - np.log(scores.max())))
+    w /= w.sum()
+    offsets = np.stack([*frame.pixel_steps_to_grid(du, dv), da], axis=1)
+    mean = w @ offsets
+    cov = (offsets - mean).T @ ((offsets - mean) * w[:, None])
+    cov += np.diag([res ** 2 / 12, res ** 2 / 12, d_yaw ** 2 / 12])
+    return frame.covariance_to_world(cov)
+
+
+def warm_up() -> None:
+    field_means(np.zeros((2, 2), np.float32), np.zeros((1, 3)), np.zeros(1), np.zeros(1))

@@ -1,0 +1,104 @@
+"""The best-first branch-and-bound search on every core (after Cartographer's
+FastCorrelativeScanMatcher2D): runs kernels.search_step in slices, so that progress is
+reported and a cancel is seen between them, on one heap per thread.
+
+The top nodes are dealt to one heap per thread (the kernel releases the GIL); the
+threads share the best leaf found so far, so each prunes by the best any has found. A
+thread whose heap runs out takes half of the fullest one. The result does not depend on
+the threads: every node reaching keep_ratio x the final best is expanded whatever the
+order, and the leaves are put in pose order before anyone picks peaks from them.
+"""
+from __future__ import annotations
+
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Optional
+
+import cv2
+import numpy as np
+
+from ..base import ProgressFn
+from .kernels import PAD, FreeBlocks, Planes, ScanTables, SearchSpace, make_heap, search_step, split_heap
+
+
+@dataclass(frozen=True)
+class SearchStats:
+    """What one search did; the verdict reads `exact`."""
+    exact: bool            # False when max_nodes stopped it: a better place may be unexplored
+    angles: int            # leaf headings over 360 deg
+    points: int            # scan points searched with
+    leaves: int            # leaves within keep_ratio of the best
+    expansions: int
+    per_level: tuple       # expansions per level
+    top_nodes: int
+    threads: int
+    best_leaf: float       # the best leaf's score, in [0, 1]
+
+
+def search_threads() -> int:
+    """Search threads: as many as OpenCV may use (cv2.getNumThreads(), by default one per
+    core), so one setting - cv2.setNumThreads - governs every matcher; the benchmark
+    gives each worker process its share of the cores that way."""
+    return max(1, cv2.getNumThreads())
+
+
+class ThreadedSearch:
+    """Owns the search's worker threads (kept between searches: starting threads per
+    search costs time and, with glibc's per-thread arenas, memory); keeps no state of a
+    search, so concurrent searches on one matcher are independent."""
+
+    def __init__(self, slice_expansions: int = 20000):
+        self.slice_expansions = slice_expansions
+        self._lock = threading.Lock()
+        self._pool: Optional[ThreadPoolExecutor] = None
+        self._pool_threads = 0
+
+    def _executor(self, threads: int) -> ThreadPoolExecutor:
+        with self._lock:
+            if self._pool is None or self._pool_threads != threads:
+                self._pool, self._pool_threads = ThreadPoolExecutor(threads, thread_name_prefix='bnb'), threads
+            return self._pool
+
+    def run(self, planes: Planes, tables: ScanTables, free: FreeBlocks, space: SearchSpace, top_nodes: np.ndarray,
+            top_level: int, max_nodes: int, progress: Optional[ProgressFn]) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Expand every node whose bound reaches space.keep x the best leaf, from the top
+        nodes (rows u, v, a, bound). Returns the leaves scoring that high (rows u, v,
+        angle index, raw score) in pose order, the expansions per level, and whether the
+        search was exhaustive (False when max_nodes stopped it)."""
+        threads = search_threads()
+        order = np.argsort(-top_nodes[:, 3], kind='stable')     # deal the best nodes evenly
+        heaps = [make_heap(top_nodes[order[k::threads]], top_level) for k in range(threads)]
+        shared_best = np.zeros(PAD, np.int64)
+        per_level = [np.zeros(max(top_level + 1, PAD), np.int64) for _ in heaps]   # PAD: see kernels
+        expanded, found, done = 0, [], [False] * threads
+
+        def run(k, budget):
+            n, done[k], leaves, heaps[k] = search_step(planes, tables, free, space, heaps[k], shared_best, budget,
+                                                       per_level[k])
+            return n, leaves
+
+        while True:
+            budget = max(1, min(self.slice_expansions, max_nodes - expanded) // threads)
+            if threads == 1:
+                results = [run(0, budget)]
+            else:
+                results = list(self._executor(threads).map(run, range(threads), [budget] * threads))
+            expanded += sum(n for n, _ in results)
+            found.extend(leaves for _, leaves in results)
+            if all(done) or expanded >= max_nodes:
+                break
+            for k in range(threads):      # an idle thread takes half of the fullest heap
+                if done[k]:
+                    j = max(range(threads), key=lambda i: heaps[i][2][0])
+                    if heaps[j][2][0] > 1:
+                        heaps[k], heaps[j] = split_heap(*heaps[j])
+                        done[k] = done[j] = False
+            if progress:   # the server's progress callback raises Cancelled on a cancel request
+                progress(min(0.95, expanded / max_nodes), shared_best[0] / (255.0 * tables.du.shape[1]))
+        leaves = np.concatenate(found)
+        leaves = leaves[leaves[:, 3] >= space.keep * shared_best[0]]
+        # in pose order, not the order the threads found them: equal scores then pick the
+        # same peaks whatever the threads
+        leaves = leaves[np.argsort((leaves[:, 0] * space.map_h + leaves[:, 1]) * space.n_angles + leaves[:, 2])]
+        return leaves, np.sum(per_level, axis=0)[:top_level + 1], all(done)

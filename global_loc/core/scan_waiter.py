@@ -1,0 +1,43 @@
+"""ScanWaiter: the newest scan with its arrival time, and a wait for one that arrives
+after a given moment. The server's scan callback puts; a goal's worker thread waits.
+No ROS here, so the waiting rule (never a stale scan, cancel seen within `poll_s`) is
+tested without processes.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Callable, Generic, Optional, TypeVar
+
+from .outcome import Cancelled
+
+T = TypeVar('T')
+
+
+class ScanWaiter(Generic[T]):
+    def __init__(self, clock: Callable[[], float] = time.monotonic):
+        self._clock = clock
+        self._cond = threading.Condition()
+        self._latest: Optional[tuple[float, T]] = None    # (arrival time, scan)
+
+    def put(self, scan: T) -> None:
+        """Keep `scan` as the newest one, arrived now."""
+        with self._cond:
+            self._latest = (self._clock(), scan)
+            self._cond.notify_all()
+
+    def wait_after(self, since: float, timeout: float, cancelled: Callable[[], bool] = lambda: False,
+                   poll_s: float = 0.05) -> Optional[T]:
+        """The first scan that arrived at or after `since` (a clock reading); None when
+        none has by since + timeout; raises Cancelled as soon as `cancelled()` says so."""
+        deadline = since + timeout
+        with self._cond:
+            while True:
+                if self._latest is not None and self._latest[0] >= since:
+                    return self._latest[1]
+                if cancelled():
+                    raise Cancelled()
+                remaining = deadline - self._clock()
+                if remaining <= 0:
+                    return None
+                self._cond.wait(min(remaining, poll_s))
