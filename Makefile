@@ -8,4 +8,4 @@ demo: setup
 	@bash -c 'source ./env.sh && python scripts/demo.py'
 
 test: setup
-	@bash -c 'source ./env.sh && python -m pytest test'
+	@bash -c 'source ./env.sh && ruff check . && python -m pytest test'

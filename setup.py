@@ -23,9 +23,9 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'server = global_loc.server:main',
-            'test_global_loc = global_loc.client:main',
-            'sim = global_loc.sim.node:main',
+            'server = global_loc.ros.server:main',
+            'test_global_loc = global_loc.ros.client:main',
+            'sim = global_loc.ros.sim_node:main',
             'localize = global_loc.cli:main',
         ],
     },

@@ -1,0 +1,4 @@
+"""global_loc: where am I in this known map? Global localization from one laser scan.
+
+core/ needs no ROS (maps, scans, matchers, the Localizer); ros/ holds the nodes; sim/ the
+pybullet simulator and synthetic scans; bench/ the benchmark."""

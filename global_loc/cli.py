@@ -1,7 +1,8 @@
 """Command line: `python -m global_loc localize|simulate ...` (see --help).
 
-`localize` reads JSON lines of LaserScan fields and writes one JSON line per scan. It is
-the stable interface the benchmark and outside users drive the core with.
+`localize` reads JSON lines of LaserScan fields and writes one JSON line per scan, with
+the typed outcome (`"outcome": "localized"`, ...). It is the stable interface outside
+users drive the core with, without ROS.
 """
 from __future__ import annotations
 
@@ -13,22 +14,22 @@ import sys
 
 import numpy as np
 
-from .localizer import LocalizerConfig, Localizer, pose_error
-from .map_io import MapError, load_map_yaml
-from .matchers import MethodError, method_names
-from .paths import default_map_yaml
-from .raycast import sample_free_poses, simulate_scan
-from .scan import Scan, ScanError, scan_to_points
-from .transform import Rigid2D
-
-
-def _pose_dict(p: Rigid2D) -> dict:
-    return {'x': round(p.x, 4), 'y': round(p.y, 4), 'yaw': round(p.yaw, 5)}
+from .core.localizer import Localizer, LocalizerConfig
+from .core.map_io import MapError, load_map_yaml
+from .core.matchers import BranchAndBoundOptions, MethodError, method_names
+from .core.matchers.bnb.options import option_fields
+from .core.outcome import Outcome
+from .core.paths import default_map_yaml
+from .core.scan import Scan, ScanError, scan_to_points
+from .core.transform import Rigid2D, pose_error
+from .sim.raycast import sample_free_poses, simulate_scan
 
 
 def localize_main(args) -> int:
     occupancy_map = load_map_yaml(args.map)
-    config = LocalizerConfig(method=args.method, angle_step_deg=args.angle_step, opening_kernel=args.opening_kernel)
+    bnb = BranchAndBoundOptions(**{name: getattr(args, f'bnb_{name}') for name, *_ in option_fields()})
+    config = LocalizerConfig(method=args.method, angle_step_deg=args.angle_step, opening_kernel=args.opening_kernel,
+                             bnb=bnb)
     localizer = Localizer(occupancy_map, config)
     localizer.matcher(args.method)   # unknown method: fail before reading any scan
     stream = sys.stdin if args.scans == '-' else open(args.scans)
@@ -44,20 +45,21 @@ def localize_main(args) -> int:
                 scan = Scan.from_dict(obj)
                 result = localizer.localize(scan)
             except (json.JSONDecodeError, ScanError) as e:
-                out['error'] = f'line {lineno}: {e}'
+                out.update(outcome=Outcome.UNUSABLE_SCAN.label, error=f'line {lineno}: {e}')
                 print(json.dumps(out), flush=True)
                 continue
             if result.pose is not None:
-                out.update(_pose_dict(result.pose))
-            out.update(score=round(result.score, 5) if math.isfinite(result.score) else None,
+                out.update(result.pose.as_dict())
+            out.update(outcome=result.outcome.label,
+                       score=round(result.score, 5) if math.isfinite(result.score) else None,
                        success=result.success, confidence=round(result.confidence, 4),
                        time_s=round(result.time_s, 4), message=result.message,
-                       hypotheses=[{**_pose_dict(h.pose), 'score': round(h.score, 5)} for h in result.hypotheses])
+                       hypotheses=[{**h.pose.as_dict(), 'score': round(h.score, 5)} for h in result.hypotheses])
             truth = obj.get('truth')
             if truth is not None and result.pose is not None:
                 t = Rigid2D(truth['x'], truth['y'], truth['yaw'])
                 d, a = pose_error(result.pose, t)
-                out.update(truth=_pose_dict(t), error_xy=round(d, 4), error_yaw_deg=round(a, 3))
+                out.update(truth=t.as_dict(), error_xy=round(d, 4), error_yaw_deg=round(a, 3))
             print(json.dumps(out), flush=True)
             if args.plot:
                 stem, ext = os.path.splitext(args.plot)
@@ -77,7 +79,7 @@ def simulate_main(args) -> int:
     for pose in sample_free_poses(occupancy_map, args.count, rng):
         scan = simulate_scan(occupancy_map, pose, args.fov, beams, args.range, noise_std=args.noise,
                              dropout=args.dropout, rng=rng)
-        print(json.dumps({**scan.to_dict(), 'truth': _pose_dict(pose)}))
+        print(json.dumps({**scan.to_dict(), 'truth': pose.as_dict()}))
     return 0
 
 
@@ -92,6 +94,9 @@ def build_parser() -> argparse.ArgumentParser:
     loc.add_argument('--opening-kernel', type=int, default=LocalizerConfig.opening_kernel,
                      help='opening kernel of the local map, pixels (0 = off)')
     loc.add_argument('--plot', help='save a picture per scan (OUT.png, OUT_002.png, ...)')
+    for name, kind, default, help_text in option_fields():
+        loc.add_argument(f'--bnb-{name.replace("_", "-")}', dest=f'bnb_{name}', type=kind, default=default,
+                         help=f'bnb: {help_text} (default {default:g})')
     loc.set_defaults(func=localize_main)
     sim = sub.add_parser('simulate', help='ray-cast scans from random free poses (with their truth)')
     sim.add_argument('--map', default=default_map_yaml())

@@ -6,6 +6,7 @@ import math
 from typing import Optional
 
 import matplotlib
+
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
@@ -16,7 +17,7 @@ from .core.transform import Rigid2D  # noqa: E402
 
 def plot_localization(path: str, occupancy_map: OccupancyMap, points_laser: np.ndarray,
                       estimate: Optional[Rigid2D], truth: Optional[Rigid2D] = None,
-                      hypotheses=(), base_T_laser: Rigid2D = Rigid2D(), title: str = '') -> None:
+                      hypotheses=(), base_T_laser: Optional[Rigid2D] = None, title: str = '') -> None:
     """`points_laser`: (N, 2) scan points in the laser frame. Poses are of the robot base."""
     occ = occupancy_map.occupancy
     shade = np.where(occ < 0, 0.8, 1.0 - np.clip(occ, 0, 100) / 100.0)
@@ -39,7 +40,7 @@ def plot_localization(path: str, occupancy_map: OccupancyMap, points_laser: np.n
     for i, hyp in enumerate(list(hypotheses)[1:]):
         draw_pose(hyp.pose, 'orange', 'other hypotheses' if i == 0 else None)
     if estimate is not None:
-        pts = (estimate * base_T_laser).apply(points_laser)
+        pts = (estimate * (base_T_laser or Rigid2D())).apply(points_laser)
         ax.plot(pts[:, 0], pts[:, 1], '.', color='red', markersize=2, label='scan at estimate')
         draw_pose(estimate, 'red', 'estimate')
     if truth is not None:

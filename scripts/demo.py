@@ -6,7 +6,6 @@ error, and saves a picture. Three real processes over DDS on a private domain.
 
 usage: demo.py [SEED] [METHOD]
 """
-import math
 import os
 import random
 import sys
@@ -16,19 +15,15 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from sensor_msgs.msg import LaserScan
 
-from global_loc.localizer import pose_error
-from global_loc.map_io import load_map_yaml
-from global_loc.paths import default_map_yaml
+from global_loc.core.map_io import load_map_yaml
+from global_loc.core.paths import default_map_yaml
+from global_loc.core.scan import scan_to_points
+from global_loc.core.transform import CORRECT_XY_M, CORRECT_YAW_DEG, format_pose, pose_correct, pose_error
 from global_loc.plot import plot_localization
-from global_loc.processes import TopicRecorder, isolated_env, reliable, start_server, start_sim
-from global_loc.raycast import sample_free_poses
-from global_loc.ros_convert import pose_from_msg, scan_from_msg
-from global_loc.scan import scan_to_points
+from global_loc.ros.convert import pose_from_msg, scan_from_msg
+from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, start_client, start_server, start_sim
+from global_loc.sim.raycast import sample_free_poses
 from global_loc.sim.simulator import BASE_T_LASER
-
-
-def fmt(p):
-    return f'x={p.x:7.3f}  y={p.y:7.3f}  yaw={math.degrees(p.yaw):7.1f} deg'
 
 
 def main():
@@ -53,22 +48,20 @@ def main():
     try:
         recorder.wait_for_publisher('/initialpose')
         print('asking the server (ros2 run global_loc test_global_loc) ...', flush=True)
-        import subprocess
-        from global_loc.processes import ros2
-        args = [ros2(), 'run', 'global_loc', 'test_global_loc', '--timeout', '10'] + (['--method', method] if method else [])
-        code = subprocess.run(args, env=env).returncode
+        code = start_client(env, '--timeout', '10', *(['--method', method] if method else [])).wait()
         truths = recorder.wait_for('/sim/true_pose', 1)
         truth = pose_from_msg(truths[-1].pose)
         published = recorder.wait_for('/initialpose', 1, timeout=3.0 if code == 0 else 0.5)
         print()
-        print(f'true pose:      {fmt(truth)}')
+        print(f'true pose:      {format_pose(truth)}')
         estimate = None
         if published:
             estimate = pose_from_msg(published[-1].pose.pose)
             d, a = pose_error(estimate, truth)
-            print(f'estimated pose: {fmt(estimate)}   (from /initialpose)')
-            print(f'error:          {d:.3f} m, {a:.1f} deg  ->  {"right" if d < 0.2 and a < 5 else "WRONG"} '
-                  f'(thesis criterion: < 0.2 m and < 5 deg)')
+            print(f'estimated pose: {format_pose(estimate)}   (from /initialpose)')
+            verdict = 'right' if pose_correct(estimate, truth) else 'WRONG'
+            print(f'error:          {d:.3f} m, {a:.1f} deg  ->  {verdict} '
+                  f'(thesis criterion: < {CORRECT_XY_M} m and < {CORRECT_YAW_DEG:g} deg)')
         else:
             print('estimated pose: none published (see the client output above)')
         scans = recorder.messages['/scan']

@@ -13,8 +13,8 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
-from global_loc.map_io import FREE, OCCUPIED, UNKNOWN, OccupancyMap, save_map_yaml  # noqa: E402
-from global_loc.transform import Rigid2D  # noqa: E402
+from global_loc.core.map_io import FREE, OCCUPIED, UNKNOWN, make_map, save_map_yaml  # noqa: E402
+from global_loc.core.transform import Rigid2D  # noqa: E402
 
 RES = 0.05
 W, H, MARGIN = 24.0, 16.0, 1.0
@@ -57,7 +57,7 @@ def main(out_dir):
     box(21.0, 13.0, 23.0, 13.4)                                       # an L-shaped counter
     box(22.6, 11.0, 23.0, 13.0)
 
-    occupancy_map = OccupancyMap(grid, RES, Rigid2D(-MARGIN, -MARGIN, 0.0), 'office')
+    occupancy_map = make_map(grid, RES, Rigid2D(-MARGIN, -MARGIN, 0.0), 'office')
     os.makedirs(out_dir, exist_ok=True)
     save_map_yaml(occupancy_map, os.path.join(out_dir, 'office.yaml'))
     print(f'wrote {out_dir}/office.yaml ({cols} x {rows} cells, {RES} m)')

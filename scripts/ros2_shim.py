@@ -8,8 +8,7 @@ Installed by scripts/setup.sh only when no real `ros2` is on the PATH.
 import os
 import sys
 
-from ament_index_python.packages import (PackageNotFoundError, get_package_prefix,
-                                         get_packages_with_prefixes)
+from ament_index_python.packages import PackageNotFoundError, get_package_prefix, get_packages_with_prefixes
 
 USAGE = ('usage: ros2 run PKG EXE [args...] | ros2 pkg prefix PKG | '
          'ros2 pkg executables [PKG] | ros2 pkg list\n'

@@ -125,10 +125,11 @@ mv "$ROOT/env.sh.tmp" "$ROOT/env.sh"
 # numba compiles them on first use (~15 s) and caches the result beside the source;
 # doing it here keeps that out of the first server start or test.
 kernel_stamp="$ROOT/install/.global_loc_kernels"
-want=$(hash_of global_loc/matchers/bnb_kernel.py constraints.txt)
+want=$(hash_of global_loc/core/pixel_kernels.py global_loc/core/matchers/bnb/kernels.py \
+    global_loc/core/matchers/bnb/refine.py constraints.txt)
 if [ "$(cat "$kernel_stamp" 2>/dev/null)" != "$want" ]; then
   say "compiling the bnb kernels (numba, cached)"
-  (. "$ROOT/env.sh" && python -c "from global_loc.matchers.bnb_kernel import warm_up; warm_up()")
+  (. "$ROOT/env.sh" && python -c "from global_loc.core.matchers.bnb import warm_up; warm_up()")
   echo "$want" > "$kernel_stamp"
 fi
 say "ready: source $ROOT/env.sh"

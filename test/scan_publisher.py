@@ -9,10 +9,10 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from sensor_msgs.msg import LaserScan
 
-from global_loc.map_io import load_map_yaml
-from global_loc.raycast import simulate_scan
-from global_loc.ros_convert import scan_to_msg
-from global_loc.transform import Rigid2D
+from global_loc.core.map_io import load_map_yaml
+from global_loc.core.transform import Rigid2D
+from global_loc.ros.convert import scan_to_msg
+from global_loc.sim.raycast import simulate_scan
 
 
 def main():

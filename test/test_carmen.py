@@ -4,8 +4,8 @@ import math
 import numpy as np
 
 from conftest import shared_path
-from global_loc.carmen import GridFrame, explained_fraction, held_out_folds, read_flaser
-from global_loc.scan import scan_to_points
+from global_loc.bench.carmen import LogGrid, explained_fraction, held_out_folds, read_flaser
+from global_loc.core.scan import scan_to_points
 
 
 def test_intel_log_parses_with_beam_geometry_and_no_return_value():
@@ -22,7 +22,7 @@ def test_intel_log_parses_with_beam_geometry_and_no_return_value():
 
 def test_held_out_maps_never_contain_the_held_out_scans_and_filters_count():
     records = read_flaser(shared_path('carmen', 'intel-corrected.log.gz'))
-    frame = GridFrame(records, 0.05)
+    frame = LogGrid(records, 0.05)
     maps, kept, stats = held_out_folds(records, frame, folds=5)
     assert stats['scans'] == 910 and 0 < stats['explained_by_map'] <= stats['pose_on_free_space'] <= 910
     assert len(kept) == stats['explained_by_map']

@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 from conftest import OFFICE_YAML
+from global_loc.core.transform import Rigid2D, pose_correct
 
 
 def run_cli(*args, stdin=None):
@@ -29,11 +30,13 @@ def test_cli_localizes_simulated_scans_and_reports_a_bad_line(tmp_path):
     assert len(rows) == 5
     assert 'error' in rows[1] and 'line 2' in rows[1]['error']
     assert 'no valid reading' in rows[2]['error']
+    assert rows[1]['outcome'] == rows[2]['outcome'] == 'unusable_scan'
     good = [rows[0], rows[3], rows[4]]
     for row in good:
-        assert {'x', 'y', 'yaw', 'score', 'success', 'time_s', 'method', 'hypotheses'} <= set(row)
+        assert {'x', 'y', 'yaw', 'score', 'success', 'outcome', 'time_s', 'method', 'hypotheses'} <= set(row)
         assert row['method'] == 'template_ccoeff'
-    assert sum(r['error_xy'] < 0.2 and r['error_yaw_deg'] < 5 for r in good) >= 2
+        assert row['success'] == (row['outcome'] == 'localized')
+    assert sum(pose_correct(Rigid2D(r['x'], r['y'], r['yaw']), Rigid2D(**r['truth'])) for r in good) >= 2
     assert os.path.getsize(plot) > 10000
 
 
@@ -44,3 +47,18 @@ def test_cli_unknown_method_and_missing_map_exit_with_a_message(tmp_path):
     assert out.returncode == 2 and 'unknown method' in out.stderr
     out = run_cli('localize', '--scans', str(scans), '--map', str(tmp_path / 'no.yaml'))
     assert out.returncode == 2 and 'not found' in out.stderr
+
+
+def test_cli_bnb_options_are_flags(tmp_path):
+    """--bnb-max-nodes reaches the matcher: a budget of 50 expansions ends every search incomplete."""
+    sim = run_cli('simulate', '--map', OFFICE_YAML, '--count', '2', '--seed', '1')
+    scans = tmp_path / 'scans.jsonl'
+    scans.write_text(sim.stdout)
+    rows = [json.loads(line) for line in run_cli('localize', '--scans', str(scans)).stdout.splitlines()]
+    assert [r['outcome'] for r in rows] == ['localized', 'localized']
+    out = run_cli('localize', '--scans', str(scans), '--bnb-max-nodes', '50')
+    assert out.returncode == 0, out.stderr
+    rows = [json.loads(line) for line in out.stdout.splitlines()]
+    assert [r['outcome'] for r in rows] == ['search_incomplete', 'search_incomplete']
+    assert all('stopped after 50 node expansions' in r['message'] and not r['success'] for r in rows)
+    assert '--bnb-keep-ratio' in run_cli('localize', '--help').stdout

@@ -1,15 +1,16 @@
 """Simulator node + server + client as separate processes over DDS: kidnap the robot,
 localize, compare /initialpose with the simulator's true pose."""
-import math
+import subprocess
 import time
 
 import pytest
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 
-from global_loc.processes import TopicRecorder, isolated_env, reliable, run_client, start_server, start_sim
-from global_loc.ros_convert import pose_from_msg, pose_to_msg
+from conftest import assert_pose_near
+from global_loc.core.transform import Rigid2D
+from global_loc.ros.convert import pose_from_msg, pose_to_msg
+from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, ros2, run_client, start_server, start_sim
 from global_loc.sim.simulator import BASE_T_LASER
-from global_loc.transform import Rigid2D
 
 # Kidnap poses. The default matcher (bnb) finds the office's places; (18.0, 4.5, -2.2) is
 # one where the thesis's matcher ties twin rooms (0 of 6 right with 360 deg scans).
@@ -37,10 +38,8 @@ def localize_and_compare(env, recorder):
     assert out.returncode == 0, out.stdout + out.stderr
     published = recorder.wait_for('/initialpose', before + 1)
     assert len(published) == before + 1
-    estimate = pose_from_msg(published[-1].pose.pose)
     truth = pose_from_msg(recorder.messages['/sim/true_pose'][-1].pose)
-    d, a = estimate.distance_to(truth)
-    assert d < 0.2 and math.degrees(a) < 5, f'estimate {estimate} truth {truth}:\n{out.stdout}'
+    assert_pose_near(pose_from_msg(published[-1].pose.pose), truth)
     assert published[-1].header.frame_id == 'map'
 
 
@@ -69,9 +68,6 @@ def test_kidnapped_robot_is_found_by_server_and_client(tmp_path, clutter):
 
 
 def test_simulator_with_a_missing_map_exits_with_the_reason(tmp_path):
-    import subprocess
-
-    from global_loc.processes import ros2
     out = subprocess.run([ros2(), 'run', 'global_loc', 'sim', '--ros-args', '-p', f'map_yaml:={tmp_path}/none.yaml'],
                          env=isolated_env(), capture_output=True, text=True, timeout=60)
     assert out.returncode == 1

@@ -1,3 +1,4 @@
+"""Map loading: nav2 YAML + image semantics, OccupancyGrid arrays, and clear errors."""
 import math
 import os
 
@@ -5,8 +6,8 @@ import numpy as np
 import pytest
 
 from conftest import shared_path
-from global_loc.map_io import MapError, from_occupancy_grid, load_map_yaml, save_map_yaml
-from global_loc.transform import Rigid2D
+from global_loc.core.map_io import MapError, from_occupancy_grid, load_map_yaml, save_map_yaml
+from global_loc.core.transform import Rigid2D
 
 # From shared/data/README.md: rows x cols and resolution.
 SHARED_MAPS = [('willow-2010-02-18-0.10.yaml', (608, 566), 0.10),
@@ -29,11 +30,12 @@ def test_testmap_origin_yaw_is_used_in_pixel_to_world():
     m = load_map_yaml(shared_path('maps', 'testmap.yaml'))
     assert m.origin.yaw == pytest.approx(1.0)
     # The lower-left pixel's centre is half a cell along the rotated axes from the origin.
-    xy = m.pixel_to_world([[0, m.height - 1]])[0]
+    xy = m.frame.pixel_to_world([[0, m.height - 1]])[0]
     half = 0.5 * m.resolution
-    expected = (m.origin.x + half * (math.cos(1.0) - math.sin(1.0)), m.origin.y + half * (math.sin(1.0) + math.cos(1.0)))
+    expected = (m.origin.x + half * (math.cos(1.0) - math.sin(1.0)),
+                m.origin.y + half * (math.sin(1.0) + math.cos(1.0)))
     assert xy == pytest.approx(expected)
-    assert m.world_to_pixel([xy])[0] == pytest.approx([0, m.height - 1])
+    assert m.frame.world_to_pixel([xy])[0] == pytest.approx([0, m.height - 1])
 
 
 def test_testmap_png_and_pgm_give_the_same_grid(tmp_path):
@@ -64,7 +66,7 @@ def test_occupancy_grid_array_rows_start_at_the_bottom():
     data[2, 3] = -1
     m = from_occupancy_grid(4, 3, 0.5, (1.0, 2.0, 0.0), data.ravel())
     assert m.occupancy[2, 1] == 100 and m.occupancy[0, 3] == -1
-    assert m.pixel_to_world([[1, 2]])[0] == pytest.approx([1.0 + 0.75, 2.0 + 0.25])
+    assert m.frame.pixel_to_world([[1, 2]])[0] == pytest.approx([1.0 + 0.75, 2.0 + 0.25])
 
 
 @pytest.mark.parametrize('args, fragment', [
@@ -78,7 +80,8 @@ def test_bad_occupancy_grid_arrays_raise_map_error(args, fragment):
         from_occupancy_grid(*args)
 
 
-GOOD_YAML = 'image: {image}\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n'
+GOOD_YAML = ('image: {image}\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\n'
+             'free_thresh: 0.196\n')
 
 
 @pytest.mark.parametrize('text, fragment', [
@@ -127,4 +130,4 @@ def test_negate_and_scale_modes(tmp_path):
 def test_world_pixel_round_trip_with_rotated_origin():
     m = from_occupancy_grid(50, 40, 0.1, Rigid2D(3.0, -2.0, 2.2), [0] * 2000)
     pts = np.array([[0.3, 7.0], [12.5, 3.3], [-4.0, -1.0]])
-    assert m.pixel_to_world(m.world_to_pixel(pts)) == pytest.approx(pts)
+    assert m.frame.pixel_to_world(m.frame.world_to_pixel(pts)) == pytest.approx(pts)

@@ -4,12 +4,12 @@ import math
 import numpy as np
 import pytest
 
-from global_loc.local_grid import LocalGrid, crop_to_obstacles, rasterize
-from global_loc.map_io import from_occupancy_grid
-from global_loc.matchers.template import rotate_tight
-from global_loc.pose import pose_from_match, translation_px
-from global_loc.scan import ScanPoints
-from global_loc.transform import Rigid2D, normalize_angle
+from global_loc.core.local_grid import LocalGrid, crop_to_obstacles, rasterize
+from global_loc.core.map_io import from_occupancy_grid
+from global_loc.core.matchers.template import rotate_tight
+from global_loc.core.pose import pose_from_match, translation_px
+from global_loc.core.scan import ScanPoints
+from global_loc.core.transform import Rigid2D, normalize_angle
 
 
 def expanded_formula(origin, res, map_h, match_uv, alpha_deg, laser_px, rot_center, rot_offset, local_h):

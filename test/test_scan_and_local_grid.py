@@ -1,10 +1,11 @@
+"""Scans, their validation, and local maps from scans (core.scan, core.local_grid)."""
 import math
 
 import numpy as np
 import pytest
 
-from global_loc.local_grid import build_local_grid, close_obstacles, crop_to_obstacles, rasterize
-from global_loc.scan import Scan, ScanError, ScanPoints, scan_to_points
+from global_loc.core.local_grid import build_local_grid, close_obstacles, crop_to_obstacles, rasterize
+from global_loc.core.scan import Scan, ScanError, ScanPoints, scan_to_points
 
 
 def make_scan(ranges, range_min=0.1, range_max=10.0):

@@ -4,10 +4,11 @@ import math
 import numpy as np
 import pytest
 
-from global_loc.raycast import simulate_scan
-from global_loc.sim.simulator import BASE_T_LASER, LaserConfig, Simulator
+from global_loc.core.transform import Rigid2D
+from global_loc.sim.laser import LaserConfig
+from global_loc.sim.raycast import simulate_scan
+from global_loc.sim.simulator import BASE_T_LASER, Simulator
 from global_loc.sim.world import merge_cells_into_boxes
-from global_loc.transform import Rigid2D
 
 
 @pytest.fixture(scope='module')

@@ -6,6 +6,7 @@ import os
 from collections import defaultdict
 
 import matplotlib
+
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
@@ -57,9 +58,10 @@ def method_table(rows, label_fn, label_name, methods, baseline_rows=None) -> str
             if not mr:
                 continue
             s = stats(mr)
-            ratio = s['median'] / base['median'] if math.isfinite(base['median']) and base['median'] > 0 else float('nan')
-            lines.append(f'| {label} | {m} | {s["n"]} | {pct(s["ok"])} | {pct(s["ok_loose"])} | {pct(s["marked_wrong"])} '
-                         f'| {secs(s["median"])} | {secs(s["p95"])} | {"–" if not math.isfinite(ratio) else f"{ratio:.3f}"} |')
+            known = math.isfinite(base['median']) and base['median'] > 0
+            ratio = f"{s['median'] / base['median']:.3f}" if known and math.isfinite(s['median']) else '–'
+            lines.append(f'| {label} | {m} | {s["n"]} | {pct(s["ok"])} | {pct(s["ok_loose"])} '
+                         f'| {pct(s["marked_wrong"])} | {secs(s["median"])} | {secs(s["p95"])} | {ratio} |')
     return '\n'.join(lines)
 
 
@@ -119,10 +121,11 @@ def write_report(rows, meta, out, maps, trials) -> None:
               [f'| {log} | {c["scans"]} | {c["pose_on_free_space"]} | {c["explained_by_map"]} | {c["sampled"]} |'
                for log, c in filt.items()] + \
               ['', method_table(car, lambda r: r['log'], 'log', methods), '',
-               'Top-4 (truth among the first four hypotheses), useful for ACES, which is nearly four-fold symmetric:', '',
+               'Top-4 (truth among the first four hypotheses), useful for ACES, which is nearly four-fold '
+               'symmetric:', '',
                '| log | ' + ' | '.join(methods) + ' |', '|---|' + '---|' * len(methods)] + \
-              [f'| {log} | ' + ' | '.join(pct(stats([r for r in lr if r['method'] == m])['top4']) for m in methods) + ' |'
-               for log, lr in sorted(group(car, lambda r: r['log']).items())] + \
+              [f'| {log} | ' + ' | '.join(pct(stats([r for r in lr if r['method'] == m])['top4']) for m in methods)
+               + ' |' for log, lr in sorted(group(car, lambda r: r['log']).items())] + \
               ['', '![success per log](carmen.png)', '']
         plot_carmen(car, methods, out)
     pre = meta.get('bnb_precompute')
@@ -159,7 +162,7 @@ def plot_sim(rows, methods, out):
     for ax, (key, title) in zip(axes.ravel(), [('fov', 'field of view [deg] (20 m, Δα 5°)'),
                                                ('range', 'max range [m] (270°, Δα 5°)'),
                                                ('angle_step', 'Δα [deg] (270°, 20 m)'),
-                                               ('clutter', 'clutter objects (270°, 20 m, Δα 5°)')]):
+                                               ('clutter', 'clutter objects (270°, 20 m, Δα 5°)')], strict=True):
         bars(ax, vary(key), methods, ok, title, 'success (0.2 m / 5°)')
         ax.set_ylim(0, 1)
     axes[0, 0].legend(fontsize=7)
@@ -168,8 +171,8 @@ def plot_sim(rows, methods, out):
     plt.close(fig)
     fig, ax = plt.subplots(figsize=(10, 4))
     keep = [r for r in rows if all(r[k] == v for k, v in base.items())]
-    bars(ax, dict(sorted(group(keep, lambda r: r['map']).items())), methods, lambda rs: stats(rs)['median'] if rs else 0,
-         'median time per localization, 270° / 20 m / Δα 5°', 'seconds')
+    bars(ax, dict(sorted(group(keep, lambda r: r['map']).items())), methods,
+         lambda rs: stats(rs)['median'] if rs else 0, 'median time per localization, 270° / 20 m / Δα 5°', 'seconds')
     ax.set_yscale('log')
     ax.legend(fontsize=7)
     fig.tight_layout()
@@ -218,8 +221,8 @@ def failure_pictures(rows, trials, maps, out, count=2) -> list[str]:
         path = os.path.join(out, f'failure_{i + 1}.png')
         plot_localization(path, maps[t.map_name], scan_to_points(t.scan).points, Rigid2D(*r['estimate']), t.truth,
                           base_T_laser=t.base_T_laser,
-                          title=f'{r["suite"]} / {r["map"]}: {BASELINE} {r["err_xy"]:.1f} m, {r["err_yaw_deg"]:.0f}° off, '
-                                f'score {r["score"]:.2f}, success={r["success"]}')
+                          title=f'{r["suite"]} / {r["map"]}: {BASELINE} {r["err_xy"]:.1f} m, '
+                                f'{r["err_yaw_deg"]:.0f}° off, score {r["score"]:.2f}, success={r["success"]}')
         md += [f'![failure {i + 1}](failure_{i + 1}.png)', '',
                f'{BASELINE}, {r["suite"]} on {r["map"]}: {r["err_xy"]:.2f} m and {r["err_yaw_deg"]:.1f}° off, '
                f'confidence {r["confidence"]:.2f}, marked success: {r["success"]}.', '']

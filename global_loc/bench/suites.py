@@ -41,7 +41,8 @@ def shared_maps(shared_dir: str) -> dict[str, str]:
     if not os.path.isdir(maps_dir):
         return {}
     names = ['willow-2010-02-18-0.10', 'building_31', 'tb3_sandbox', 'depot']
-    return {n: os.path.join(maps_dir, f'{n}.yaml') for n in names if os.path.exists(os.path.join(maps_dir, f'{n}.yaml'))}
+    paths = {n: os.path.join(maps_dir, f'{n}.yaml') for n in names}
+    return {n: p for n, p in paths.items() if os.path.exists(p)}
 
 
 def load_maps(shared_dir: str, quick: bool) -> dict[str, OccupancyMap]:

@@ -62,6 +62,10 @@ class Rigid2D:
     def as_tuple(self) -> tuple[float, float, float]:
         return (self.x, self.y, self.yaw)
 
+    def as_dict(self) -> dict:
+        """{'x', 'y', 'yaw'} rounded for JSON output (0.1 mm, 1e-5 rad)."""
+        return {'x': round(self.x, 4), 'y': round(self.y, 4), 'yaw': round(self.yaw, 5)}
+
 
 def covariance_of_composition(pose: Rigid2D, covariance, child: Rigid2D) -> np.ndarray:
     """Covariance (x, y, yaw) of `pose * child` when `pose` has `covariance` and `child`

@@ -1,4 +1,6 @@
-"""`ros2 run global_loc test_global_loc`: send one Localize goal and print what happens.
+"""`ros2 run global_loc test_global_loc`: send one Localize goal and print what happens
+(or, with --json, one JSON object: outcome, pose, covariance, score, confidence,
+hypotheses).
 
 Exit code 0 when the server localized the robot, 1 when the goal ended without a pose
 it is sure of (the message says why), 2 when no server answered.
@@ -6,17 +8,19 @@ it is sure of (the message says why), 2 when no server answered.
 from __future__ import annotations
 
 import argparse
-import math
+import json
 import sys
 import time
 
 import rclpy
 from action_msgs.msg import GoalStatus
-from global_loc_interfaces.action import Localize
 from rclpy.action import ActionClient
 from rclpy.executors import ExternalShutdownException
 
-from .ros_convert import pose_from_msg
+from global_loc_interfaces.action import Localize
+
+from ..core.transform import format_pose
+from .convert import pose_from_msg, result_to_dict
 
 STATUS = {GoalStatus.STATUS_SUCCEEDED: 'succeeded', GoalStatus.STATUS_ABORTED: 'aborted',
           GoalStatus.STATUS_CANCELED: 'canceled'}
@@ -33,11 +37,9 @@ def parse_args(argv):
     parser.add_argument('--server-timeout', type=float, default=10.0, help='seconds to wait for the server')
     parser.add_argument('--cancel-after', type=float, default=0.0, help='cancel the goal after this many seconds')
     parser.add_argument('--action', default='localize', help='action name')
+    parser.add_argument('--json', action='store_true',
+                        help='print only the result, as one JSON object (outcome, pose, covariance, ...)')
     return parser.parse_args(argv)
-
-
-def fmt_pose(p) -> str:
-    return f'x={p.x:.3f} y={p.y:.3f} yaw={math.degrees(p.yaw):.1f} deg'
 
 
 def run(node, args) -> int:
@@ -52,6 +54,8 @@ def run(node, args) -> int:
 
     def on_feedback(fb):
         f = fb.feedback
+        if args.json:
+            return
         if f.stage != last_stage[0] or f.progress >= 0.95:
             print(f'[{f.progress * 100:5.1f}%] {f.stage}  best score {f.best_score:.3f}', flush=True)
             last_stage[0] = f.stage
@@ -68,18 +72,24 @@ def run(node, args) -> int:
         while not result_future.done() and time.monotonic() < deadline:
             rclpy.spin_once(node, timeout_sec=0.05)
         if not result_future.done():
-            print(f'canceling after {args.cancel_after:.1f} s', flush=True)
+            if not args.json:
+                print(f'canceling after {args.cancel_after:.1f} s', flush=True)
             rclpy.spin_until_future_complete(node, handle.cancel_goal_async())
     rclpy.spin_until_future_complete(node, result_future)
     response = result_future.result()
     result = response.result
     status = STATUS.get(response.status, str(response.status))
-    if len(result.hypotheses.poses):
-        print(f'pose:       {fmt_pose(pose_from_msg(result.pose.pose.pose))}  (frame {result.pose.header.frame_id})')
-        print(f'score:      {result.score:.3f}   confidence: {result.confidence:.2f}   time: {result.elapsed_s:.2f} s')
-        for i, (p, s) in enumerate(zip(result.hypotheses.poses, result.hypothesis_scores)):
-            print(f'  hypothesis {i + 1}: {fmt_pose(pose_from_msg(p))}  score {s:.3f}')
-    print(f'{status}: {result.message}')
+    if args.json:
+        print(json.dumps(result_to_dict(result, status)), flush=True)
+    else:
+        if len(result.hypotheses.poses):
+            print(f'pose:       {format_pose(pose_from_msg(result.pose.pose.pose))}  '
+                  f'(frame {result.pose.header.frame_id})')
+            print(f'score:      {result.score:.3f}   confidence: {result.confidence:.2f}   '
+                  f'time: {result.elapsed_s:.2f} s')
+            for i, (p, s) in enumerate(zip(result.hypotheses.poses, result.hypothesis_scores, strict=True)):
+                print(f'  hypothesis {i + 1}: {format_pose(pose_from_msg(p))}  score {s:.3f}')
+        print(f'{status}: {result.message}')
     return 0 if response.status == GoalStatus.STATUS_SUCCEEDED and result.success else 1
 
 

@@ -1,16 +1,21 @@
-"""Message <-> core type conversions, shared by the ROS nodes (server, client, sim)."""
+"""Message <-> core type conversions, shared by the ROS nodes (server, client, sim): the
+only place that knows both a message's fields and a core type's."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from geometry_msgs.msg import Pose, PoseWithCovarianceStamped, Quaternion
+from geometry_msgs.msg import Pose, PoseArray, PoseWithCovarianceStamped, Quaternion
 from nav_msgs.msg import OccupancyGrid
 from sensor_msgs.msg import LaserScan
 
-from .map_io import OccupancyMap, from_occupancy_grid
-from .scan import Scan
-from .transform import Rigid2D
+from global_loc_interfaces.action import Localize
+
+from ..core.localizer import LocalizationResult
+from ..core.map_io import OccupancyMap, from_occupancy_grid
+from ..core.outcome import Outcome
+from ..core.scan import Scan
+from ..core.transform import Rigid2D
 
 
 def scan_from_msg(msg: LaserScan) -> Scan:
@@ -75,3 +80,41 @@ def map_from_msg(msg: OccupancyGrid) -> OccupancyMap:
     origin = Rigid2D(info.origin.position.x, info.origin.position.y, quaternion_to_yaw(info.origin.orientation))
     return from_occupancy_grid(info.width, info.height, info.resolution, origin,
                                np.asarray(msg.data, dtype=np.int16), source=f'OccupancyGrid on {msg.header.frame_id}')
+
+
+def result_to_msg(result: LocalizationResult, frame_id: str, stamp, elapsed_s: float) -> Localize.Result:
+    """The action result for a localization the matcher finished (stamped with the scan's time)."""
+    out = Localize.Result(outcome=int(result.outcome), success=result.success, message=result.message,
+                          score=float(result.score), confidence=float(result.confidence), elapsed_s=float(elapsed_s))
+    out.hypotheses = PoseArray()
+    out.hypotheses.header.frame_id = frame_id
+    out.hypotheses.header.stamp = stamp
+    out.hypotheses.poses = [pose_to_msg(h.pose) for h in result.hypotheses]
+    out.hypothesis_scores = [float(h.score) for h in result.hypotheses]
+    if result.pose is not None:
+        out.pose = pose_with_covariance(result.pose, result.covariance, frame_id, stamp)
+    return out
+
+
+def ended_result(outcome: Outcome, message: str) -> Localize.Result:
+    """The action result for a goal the server ended before the matcher did (busy, no scan, ...)."""
+    return Localize.Result(outcome=int(outcome), success=False, message=message)
+
+
+def result_to_dict(result: Localize.Result, status: str) -> dict:
+    """An action result as the client's JSON object."""
+    hypotheses = [{**pose_from_msg(p).as_dict(), 'score': round(float(s), 5)}
+                  for p, s in zip(result.hypotheses.poses, result.hypothesis_scores, strict=True)]
+    try:
+        outcome = Outcome(result.outcome).label
+    except ValueError:
+        outcome = f'unknown_{result.outcome}'
+    out = {'outcome': outcome, 'status': status, 'success': bool(result.success), 'message': result.message,
+           'score': float(result.score) if math.isfinite(result.score) else None,
+           'confidence': float(result.confidence), 'elapsed_s': float(result.elapsed_s), 'hypotheses': hypotheses,
+           'pose': None, 'covariance': None}
+    if hypotheses:
+        out['pose'] = pose_from_msg(result.pose.pose.pose).as_dict()
+        cov = np.asarray(result.pose.pose.covariance, dtype=float).reshape(6, 6)[np.ix_([0, 1, 5], [0, 1, 5])]
+        out['covariance'] = cov.tolist()
+    return out

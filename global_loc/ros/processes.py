@@ -1,13 +1,20 @@
-"""Starting and stopping the package's ROS 2 processes (server, sim, client) for the
-demo and the tests, in the place of `ros2 launch` (not on PyPI). A private DDS domain
-(ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, a random ROS_DOMAIN_ID) keeps runs apart."""
+"""Starting and stopping the package's ROS 2 processes (server, sim, client) and
+recording topics, for the demo and the tests, in the place of `ros2 launch` (not on
+PyPI). A private DDS domain (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, a random
+ROS_DOMAIN_ID) keeps runs apart."""
 import os
 import random
 import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
 
 def isolated_env() -> dict:
     env = dict(os.environ)
@@ -42,7 +49,8 @@ class Process:
             if text in self.output():
                 return
             if self.proc.poll() is not None:
-                raise RuntimeError(f'process exited ({self.proc.returncode}) before printing {text!r}:\n{self.output()}')
+                raise RuntimeError(f'process exited ({self.proc.returncode}) before printing {text!r}:\n'
+                                   f'{self.output()}')
             time.sleep(0.1)
         raise RuntimeError(f'no {text!r} within {timeout} s:\n{self.output()}')
 
@@ -82,9 +90,20 @@ def start_sim(env, log_path, *params) -> Process:
     return start_node(env, log_path, 'sim', 'sim ready', *params)
 
 
+def start_client(env, *args, **popen_kwargs) -> subprocess.Popen:
+    """`ros2 run global_loc test_global_loc ARGS` in the background."""
+    return subprocess.Popen([ros2(), 'run', 'global_loc', 'test_global_loc', *args], env=env, **popen_kwargs)
+
+
 def run_client(env, *args, timeout=120.0) -> subprocess.CompletedProcess:
-    return subprocess.run([ros2(), 'run', 'global_loc', 'test_global_loc', *args], env=env, capture_output=True,
-                          text=True, timeout=timeout)
+    """The client run to its end, its output captured."""
+    client = start_client(env, *args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        stdout, stderr = client.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        client.kill()
+        raise
+    return subprocess.CompletedProcess(client.args, client.returncode, stdout, stderr)
 
 
 class TopicRecorder:
@@ -92,10 +111,6 @@ class TopicRecorder:
     env's domain), spun in a background thread. `topics`: {name: (msg type, qos)}."""
 
     def __init__(self, env: dict, topics: dict, node_name: str = 'global_loc_recorder'):
-        import threading
-
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=int(env['ROS_DOMAIN_ID']))
         self.node = rclpy.create_node(node_name, context=self.context)
@@ -140,7 +155,6 @@ class TopicRecorder:
         self.context.try_shutdown()
 
 
-def reliable(depth: int = 10, latched: bool = False):
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+def reliable(depth: int = 10, latched: bool = False) -> QoSProfile:
     return QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)

@@ -7,7 +7,6 @@ geometry_msgs/PoseStamped on /sim/true_pose. Drives the wheels from /cmd_vel
 """
 from __future__ import annotations
 
-import math
 import sys
 import time
 
@@ -17,23 +16,25 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 
-from ..map_io import MapError, load_map_yaml
-from ..node_main import run_node
-from ..ros_convert import pose_from_msg, pose_to_msg, scan_to_msg
-from ..transform import Rigid2D
-from .simulator import LaserConfig, Simulator
+from ..core.map_io import MapError, load_map_yaml
+from ..core.paths import default_map_yaml
+from ..core.transform import Rigid2D, format_pose
+from ..sim.laser import LaserConfig
+from ..sim.simulator import Simulator
+from .convert import pose_from_msg, pose_to_msg, scan_to_msg
+from .node_main import run_node
 
 
 class SimNode(Node):
     def __init__(self):
         super().__init__('global_loc_sim')
-        from ..server import default_map_yaml
 
         def param(name, value, description):
             return self.declare_parameter(name, value, ParameterDescriptor(description=description)).value
 
         map_yaml = param('map_yaml', default_map_yaml(), 'map the world is built from')
-        start = Rigid2D(param('x', 0.0, 'start x, m'), param('y', 0.0, 'start y, m'), param('yaw', 0.0, 'start yaw, rad'))
+        start = Rigid2D(param('x', 0.0, 'start x, m'), param('y', 0.0, 'start y, m'),
+                        param('yaw', 0.0, 'start yaw, rad'))
         laser = LaserConfig(fov_deg=param('fov_deg', 270.0, 'laser field of view, degrees'),
                             num_beams=param('num_beams', 541, 'laser beam count'),
                             range_min=param('range_min', 0.05, 'm'), range_max=param('range_max', 20.0, 'm'),
@@ -57,8 +58,8 @@ class SimNode(Node):
         self.period = 1.0 / laser.rate_hz
         self.create_timer(self.period, self.tick)
         self.get_logger().info(f'sim ready: {map_yaml} as {self.sim.num_wall_boxes} boxes, robot at '
-                               f'x={start.x:.2f} y={start.y:.2f} yaw={math.degrees(start.yaw):.1f} deg, '
-                               f'{clutter} clutter objects, {laser.num_beams} beams over {laser.fov_deg} deg')
+                               f'{format_pose(start)}, {clutter} clutter objects, '
+                               f'{laser.num_beams} beams over {laser.fov_deg} deg')
 
     def close(self) -> None:
         """Disconnect pybullet (run_node calls it on shutdown)."""
@@ -73,7 +74,7 @@ class SimNode(Node):
         """Teleport the robot."""
         pose = pose_from_msg(msg.pose)
         self.sim.place(pose)
-        self.get_logger().info(f'teleported to x={pose.x:.2f} y={pose.y:.2f} yaw={math.degrees(pose.yaw):.1f} deg')
+        self.get_logger().info(f'teleported to {format_pose(pose)}')
 
     def tick(self) -> None:
         """Advance physics by one scan period (driving if commanded), publish scan and truth."""

@@ -51,7 +51,7 @@ def sample_free_poses(occupancy_map: OccupancyMap, n: int, rng, clearance: float
     idx = rng.choice(len(rows), size=n, replace=len(rows) < n)
     xy = occupancy_map.frame.pixel_to_world(np.stack([cols[idx], rows[idx]], axis=1).astype(float))
     yaws = rng.uniform(-math.pi, math.pi, n)
-    return [Rigid2D(float(x), float(y), float(a)) for (x, y), a in zip(xy, yaws)]
+    return [Rigid2D(float(x), float(y), float(a)) for (x, y), a in zip(xy, yaws, strict=True)]
 
 
 def points_cut_from_map(occupancy_map: OccupancyMap, laser_pose: Rigid2D, radius: float) -> ScanPoints:

@@ -11,7 +11,6 @@ The laser is cast with rayTestBatch from the laser link's pose, so clutter added
 """
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 
@@ -108,7 +107,7 @@ class Simulator:
         """`count` chairs/bins/people-sized objects on free cells, away from a pose."""
         objects = []
         for pose in sample_free_poses(self.map, count * 4, self.rng, clearance=0.5):
-            if keep_clear_of is not None and math.hypot(pose.x - keep_clear_of.x, pose.y - keep_clear_of.y) < clear_radius:
+            if keep_clear_of is not None and pose.distance_to(keep_clear_of)[0] < clear_radius:
                 continue
             kind = self.rng.integers(3)
             size = [(float(self.rng.uniform(0.4, 0.6)), float(self.rng.uniform(0.4, 0.6))),   # chair

@@ -24,7 +24,7 @@ def merge_cells_into_boxes(occupied: np.ndarray) -> list[tuple[int, int, int, in
         if r < occupied.shape[0]:
             starts = np.flatnonzero(d[r] == 1)
             ends = np.flatnonzero(d[r] == -1)
-            runs = set(zip(starts.tolist(), ends.tolist()))
+            runs = set(zip(starts.tolist(), ends.tolist(), strict=True))
         for run in list(open_runs):
             if run not in runs:
                 boxes.append((open_runs.pop(run), run[0], r, run[1]))
@@ -45,7 +45,7 @@ def add_map_walls(client, occupancy_map: OccupancyMap) -> int:
     # Pixel rectangle -> centre in the map frame (through the map's own conversion).
     centres_px = np.array([[(c0 + c1 - 1) / 2.0, (r0 + r1 - 1) / 2.0] for r0, c0, r1, c1 in boxes])
     centres = occupancy_map.frame.pixel_to_world(centres_px)
-    for (r0, c0, r1, c1), (x, y) in zip(boxes, centres):
+    for (r0, c0, r1, c1), (x, y) in zip(boxes, centres, strict=True):
         half = [(c1 - c0) * res / 2.0, (r1 - r0) * res / 2.0, WALL_HEIGHT / 2.0]
         shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
         p.createMultiBody(0, shape, -1, [x, y, WALL_HEIGHT / 2.0], quat, physicsClientId=client)

@@ -56,7 +56,7 @@ class PrecomputationGridStack:
                 if m >= self.margin(h):
                     break
         planes, plane = [], np.empty_like(base)
-        for (h, m), i in self.index.items():
+        for h, m in self.index:
             k = 2 ** int(shift[h])
             # dilate's window at (x, y) spans [x - anchor, x - anchor + size): the block and m
             # around it, and the k - 1 cells after it that the stored cell (x, y) also stands for

@@ -26,11 +26,11 @@ def judge(candidates: list[Candidate], stats: Optional[SearchStats], options: Br
     else `ambiguous`. A search stopped by its node budget is never a success: a better
     place may lie in what it did not explore."""
     opt = options
-    if not candidates:
-        return Verdict(Outcome.NO_MATCH, 0.0, 'bnb found no pose on free space')
     if stats is not None and not stats.exact:
         return Verdict(Outcome.SEARCH_INCOMPLETE, 0.0, f'search incomplete: stopped after {opt.max_nodes} node '
                                                        f'expansions; best of what was explored, see the hypotheses')
+    if not candidates:
+        return Verdict(Outcome.NO_MATCH, 0.0, 'bnb found no pose on free space')
     best, others = candidates[0], candidates[1:]
     fit = [c.explained for c in candidates]
     # No other peak found means none scored above keep_ratio x best (in either score).
