@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 
 from ..core.localizer import Localizer
+from ..core.outcome import Outcome
+from ..core.scan import ScanError
 from ..core.transform import pose_correct, pose_error
 
 _MAPS = {}        # map name -> OccupancyMap, in each worker (set by worker_init)
@@ -27,8 +29,9 @@ def run_job(job):
         else:
             res = loc.localize(trial.scan, method, step, base_T_laser=trial.base_T_laser)
     except Exception as e:   # a failure of a method on one trial is a data point, not a crash
-        return {**row, 'error': f'{type(e).__name__}: {e}', 'ok': False, 'ok_loose': False, 'success': False,
-                'time_s': float('nan')}
+        outcome = Outcome.UNUSABLE_SCAN if isinstance(e, ScanError) else Outcome.INTERNAL_ERROR
+        return {**row, 'error': f'{type(e).__name__}: {e}', 'outcome': outcome.label, 'ok': False, 'ok_loose': False,
+                'success': False, 'time_s': float('nan')}
     row.update(time_s=res.time_s, success=res.success, confidence=res.confidence,
                score=res.score if math.isfinite(res.score) else None, found=res.pose is not None,
                top4_ok=any(pose_correct(h.pose, trial.truth) for h in res.hypotheses[:4]),

@@ -18,8 +18,8 @@ from .base import Candidate, Match, Matcher
 
 class RotatedTemplateMatcher(Matcher):
     """`blur`: soften map and template alike. TM_SQDIFF_NORMED needs it: on unblurred
-    lines nearly every placement saturates at OpenCV's clamp of 1 (0/20 right on the
-    office map, 3/20 with it); TM_CCOEFF_NORMED does better without (18/20 vs 14/20)."""
+    one-pixel lines nearly every placement saturates at OpenCV's clamp of 1; on the same
+    scans TM_CCOEFF_NORMED does better without."""
 
     def __init__(self, occupancy_map, cv_method: int, name: str, min_score: float, blur: bool):
         super().__init__(occupancy_map)

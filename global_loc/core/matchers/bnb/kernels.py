@@ -88,12 +88,11 @@ def node_bounds(planes, tables, tu, tv, ta, h):
 
 # Counters that one thread writes at every node (a heap's size, expansions per level) are
 # PAD int64s long, only the first few used: two threads' counters in one 64-byte cache
-# line would make each write wait for the other core (false sharing; measured: each
-# thread's expansions took twice as long).
+# line would make each write wait for the other core (false sharing).
 PAD = 16
 
-# The pending nodes: a binary max-heap in arrays (heapq on a numba typed List costs
-# ~1.5 us per push or pop; these ~0.1 us). keys[k] = bound x 8 + 7 - level: the highest
+# The pending nodes: a binary max-heap in flat arrays (heapq on a numba typed List calls
+# into the list's C code for every item access). keys[k] = bound x 8 + 7 - level: the highest
 # bound first, the deeper node first among equal bounds (reaching leaves sooner raises
 # the pruning threshold sooner). nodes[k] = (level, u, v, a). size[0]: the heap's size.
 @njit(cache=True, nogil=True, inline='always')
