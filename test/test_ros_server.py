@@ -136,7 +136,7 @@ def test_goal_while_busy_is_aborted_with_a_reason(system):
             time.sleep(0.1)
         code, result = localize(env)
         assert code == 1 and result['outcome'] == 'busy'
-        assert result['message'].startswith('busy: another goal is running')
+        assert result['message'].startswith('busy: another localization is running')
     finally:
         slow_out, _ = slow.communicate(timeout=60)
     assert json.loads(slow_out)['outcome'] in ('localized', 'canceled'), slow_out   # the first goal ran on

@@ -18,6 +18,7 @@ from .matchers import BranchAndBoundOptions, MatchOptions, make_matcher, resolve
 from .matchers.base import ProgressFn, distinct
 from .outcome import Outcome
 from .scan import Scan, ScanPoints, scan_to_points
+from .search_region import SearchRegion
 from .transform import Rigid2D, covariance_of_composition
 
 
@@ -82,29 +83,36 @@ class Localizer:
         return self._matchers[name]
 
     def localize(self, scan: Scan, method: Optional[str] = None, angle_step_deg: Optional[float] = None,
-                 progress: Optional[ProgressFn] = None, base_T_laser: Optional[Rigid2D] = None
-                 ) -> LocalizationResult:
+                 progress: Optional[ProgressFn] = None, base_T_laser: Optional[Rigid2D] = None,
+                 region: Optional[SearchRegion] = None) -> LocalizationResult:
         """Localize one scan. Raises ScanError for an unusable scan, MethodError for an
         unknown method, ValueError for a bad angle step and Cancelled if `progress` raises
         it; otherwise returns a result, successful or not. `base_T_laser` overrides the
-        config's laser mounting."""
+        config's laser mounting; `region` (of the robot base) restricts the search."""
         t0 = time.perf_counter()
-        return self.localize_points(scan_to_points(scan), method, angle_step_deg, progress, base_T_laser, t0)
+        return self.localize_points(scan_to_points(scan), method, angle_step_deg, progress, base_T_laser, t0,
+                                    region)
 
     def localize_points(self, points: ScanPoints, method: Optional[str] = None,
                         angle_step_deg: Optional[float] = None, progress: Optional[ProgressFn] = None,
-                        base_T_laser: Optional[Rigid2D] = None, t0: Optional[float] = None) -> LocalizationResult:
+                        base_T_laser: Optional[Rigid2D] = None, t0: Optional[float] = None,
+                        region: Optional[SearchRegion] = None) -> LocalizationResult:
         """`localize` for points already in the laser frame (e.g. a local map cut from the map)."""
         cfg = self.config
         t0 = time.perf_counter() if t0 is None else t0
         matcher = self.matcher(method or cfg.method)
+        base_T_laser = base_T_laser or cfg.base_T_laser
+        laser_T_base = base_T_laser.inverse()
+        bounded = region is not None and region.bounded
         options = MatchOptions(angle_step_deg=check_angle_step(angle_step_deg or cfg.angle_step_deg),
-                               opening_kernel=cfg.opening_kernel)
+                               opening_kernel=cfg.opening_kernel,
+                               region=region.for_laser(base_T_laser) if bounded else None)
         found = matcher.match(points, options, progress)
-        best = distinct(found.candidates, cfg.num_hypotheses, cfg.hypothesis_min_distance,
+        candidates = [c for c in found.candidates if region.contains(c.laser_pose * laser_T_base)] if bounded \
+            else found.candidates
+        best = distinct(candidates, cfg.num_hypotheses, cfg.hypothesis_min_distance,
                         math.radians(cfg.hypothesis_min_angle_deg))
         verdict = matcher.judge(best, found.stats)
-        laser_T_base = (base_T_laser or cfg.base_T_laser).inverse()
         hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in best]
         result = LocalizationResult(verdict.outcome, verdict.message, matcher.name, confidence=verdict.confidence,
                                     hypotheses=hyps, time_s=time.perf_counter() - t0, dropped=points.dropped,

@@ -24,6 +24,7 @@ class Outcome(enum.IntEnum):
     UNUSABLE_SCAN = 14      # malformed scan, or no valid reading
     CANCELED = 15
     INTERNAL_ERROR = 16
+    NOT_ACTIVE = 17         # the lifecycle node is not active
 
     @property
     def label(self) -> str:

@@ -42,8 +42,11 @@ def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]
         # SIGINT/SIGTERM shut the context down under a running callback or the constructor
         # (its publish then fails): that is the requested stop, not a crash.
     finally:
+        stop = getattr(node, 'stop_work', None)
+        if stop:
+            stop()        # end running work (a goal) first, so the executor's threads can be joined
         if executor is not None:
-            executor.shutdown(timeout_sec=5.0)   # join the executor's worker threads first
+            executor.shutdown(timeout_sec=5.0)   # join the executor's worker threads
         if node is not None:
             close = getattr(node, 'close', None)
             if close:

@@ -16,6 +16,7 @@ from ..core.transform import Rigid2D
 
 @dataclass(frozen=True)
 class ServerSettings:
+    autostart: bool
     map_yaml: str
     use_map_topic: bool
     map_topic: str
@@ -38,6 +39,7 @@ def declare_server_parameters(node: Node) -> tuple[ServerSettings, LocalizerConf
         return node.declare_parameter(name, value, ParameterDescriptor(description=description, **ranges)).value
 
     settings = ServerSettings(
+        autostart=param('autostart', True, 'configure and activate on start (false: a lifecycle manager does)'),
         map_yaml=param('map_yaml', default_map_yaml(), 'nav2 map YAML to localize in (default: the shipped map)'),
         use_map_topic=param('use_map_topic', False, 'take the map from an OccupancyGrid topic instead of map_yaml'),
         map_topic=param('map_topic', '/map', 'OccupancyGrid topic (transient local, like nav2 map_server)'),

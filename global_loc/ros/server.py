@@ -1,13 +1,20 @@
-"""`ros2 run global_loc server`: the global-localization action server.
+"""`ros2 run global_loc server`: the global-localization server, a lifecycle node.
 
-Action `localize` (global_loc_interfaces/action/Localize): on a goal, take the next scan
-that arrives on `scan_topic` after the goal, localize it in the map, stream feedback,
-and publish the pose on `initialpose_topic` (PoseWithCovarianceStamped, frame `map`)
-when the result is successful and the goal asks for it, so AMCL re-initializes.
+States as in nav2: *configure* loads the map (file or topic) and precomputes the default
+matcher; *activate* serves; *deactivate* stops accepting work (a running localization
+ends canceled); *cleanup* drops the map. With `autostart` (default) it configures and
+activates itself; otherwise a lifecycle manager drives it (`~/change_state`).
 
-One goal at a time: a goal that arrives while another runs is accepted and at once
-aborted with outcome BUSY (an action rejection cannot carry a reason). Every failure
-ends that goal with its outcome and a message; the node keeps serving.
+Three ways to ask, one code path (`serve`), one localization at a time:
+- action `localize` (global_loc_interfaces/action/Localize): feedback, the result with
+  its typed outcome, an optional search prior;
+- `~/trigger` (std_srvs/Trigger): the server's defaults, `success` and a one-line message;
+- `~/reinitialize_global_localization` (std_srvs/Empty): the same, for nav2's
+  ReinitializeGlobalLocalization behaviour-tree node.
+Each takes the first scan that arrives after the request, localizes it, publishes the
+pose on `initialpose_topic` when confident, and shows the hypotheses and the local map
+on `~/hypotheses`, `~/hypothesis_markers`, `~/local_map` (RViz; transient local). Asked
+while not active, busy, or unable, it answers with the outcome and a reason.
 """
 from __future__ import annotations
 
@@ -17,15 +24,17 @@ import threading
 import time
 import traceback
 
-import rclpy
-from geometry_msgs.msg import PoseWithCovarianceStamped
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.time import Time
 from sensor_msgs.msg import LaserScan
+from std_srvs.srv import Empty, Trigger
+from visualization_msgs.msg import MarkerArray
 
 from global_loc_interfaces.action import Localize
 
@@ -33,54 +42,113 @@ from ..core.localizer import Localizer, check_angle_step
 from ..core.map_io import MapError, load_map_yaml
 from ..core.matchers import MethodError, resolve_method
 from ..core.outcome import Cancelled, Outcome
-from ..core.scan import ScanError
+from ..core.scan import ScanError, scan_to_points
 from ..core.scan_waiter import ScanWaiter
+from ..core.search_region import SearchRegion
 from ..core.transform import Rigid2D, format_pose
 from .convert import ended_result, map_from_msg, quaternion_to_yaw, result_to_msg, scan_from_msg
 from .node_main import run_node
 from .parameters import declare_server_parameters
+from .rviz import hypotheses_msg, local_map_msg, markers_msg
+
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-class GlobalLocServer(Node):
+class GlobalLocServer(LifecycleNode):
     def __init__(self):
         super().__init__('global_loc_server')
         self.settings, self.config = declare_server_parameters(self)
-        s = self.settings
         self.group = ReentrantCallbackGroup()
         self.localizer: Localizer | None = None
         self.map_error = 'no map loaded yet'
+        self.active = False
+        self.stopping = threading.Event()     # set: running work ends (deactivate, cleanup, shutdown)
         self.busy = threading.Lock()
         self.scans: ScanWaiter[LaserScan] = ScanWaiter()
         self.tf_buffer = self._make_tf_buffer()
+        self.pubs: dict = {}
+        self.subs: list = []
+        # The action and the services exist in every state, so a request while inactive gets a reason.
+        self.action_server = ActionServer(self, Localize, 'localize', self.execute, callback_group=self.group,
+                                          goal_callback=self.on_goal, cancel_callback=self.on_cancel)
+        self.create_service(Trigger, '~/trigger', self.on_trigger, callback_group=self.group)
+        self.create_service(Empty, '~/reinitialize_global_localization', self.on_reinitialize,
+                            callback_group=self.group)
+        if self.settings.autostart:
+            self.trigger_configure()
+            self.trigger_activate()
+        else:
+            self.get_logger().info('unconfigured: waiting for a lifecycle manager (autostart is false)')
 
-        self.create_subscription(LaserScan, s.scan_topic, self.scans.put, qos_profile_sensor_data,
-                                 callback_group=self.group)
-        self.initialpose_pub = self.create_publisher(PoseWithCovarianceStamped, s.initialpose_topic,
-                                                     QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
+    # ---- lifecycle -------------------------------------------------------------------------
+    def on_configure(self, state) -> TransitionCallbackReturn:
+        """Load the map (or subscribe to it) and precompute; create the publishers and the scan subscription."""
+        s = self.settings
+        self.stopping.clear()
+        reliable = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+        self.pubs = {'initialpose': self.create_lifecycle_publisher(PoseWithCovarianceStamped, s.initialpose_topic,
+                                                                    reliable),
+                     'hypotheses': self.create_lifecycle_publisher(PoseArray, '~/hypotheses', LATCHED),
+                     'markers': self.create_lifecycle_publisher(MarkerArray, '~/hypothesis_markers', LATCHED),
+                     'local_map': self.create_lifecycle_publisher(OccupancyGrid, '~/local_map', LATCHED)}
+        self.subs = [self.create_subscription(LaserScan, s.scan_topic, self.scans.put, qos_profile_sensor_data,
+                                              callback_group=self.group)]
         if s.use_map_topic:
-            self.create_subscription(OccupancyGrid, s.map_topic, self.on_map,
-                                     QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                                                durability=DurabilityPolicy.TRANSIENT_LOCAL),
-                                     callback_group=self.group)
+            self.subs.append(self.create_subscription(OccupancyGrid, s.map_topic, self.on_map, LATCHED,
+                                                      callback_group=self.group))
             self.map_error = f'waiting for a map on {s.map_topic}'
             self.get_logger().info(f'waiting for the map on {s.map_topic}')
         else:
             self.load_map_file(s.map_yaml)
-        self.action_server = ActionServer(self, Localize, 'localize', self.execute, callback_group=self.group,
-                                          goal_callback=self.on_goal, cancel_callback=self.on_cancel)
-        self.get_logger().info(f'ready: action "localize", scans on {s.scan_topic}, '
-                               f'poses to {s.initialpose_topic}, default method {self.config.method}')
+        self.get_logger().info('configured')
+        return TransitionCallbackReturn.SUCCESS
 
-    # ---- map -----------------------------------------------------------------
+    def on_activate(self, state) -> TransitionCallbackReturn:
+        self.stopping.clear()
+        self.active = True
+        s = self.settings
+        self.get_logger().info(f'ready: action "localize", services ~/trigger and ~/reinitialize_global_localization, '
+                               f'scans on {s.scan_topic}, poses to {s.initialpose_topic}, '
+                               f'default method {self.config.method}')
+        return super().on_activate(state)
+
+    def on_deactivate(self, state) -> TransitionCallbackReturn:
+        self.stop_work()
+        self.get_logger().info('deactivated: not accepting work')
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state) -> TransitionCallbackReturn:
+        self.stop_work()
+        for pub in self.pubs.values():
+            self.destroy_lifecycle_publisher(pub)
+        for sub in self.subs:
+            self.destroy_subscription(sub)
+        self.pubs, self.subs = {}, []
+        self.localizer, self.map_error = None, 'no map loaded (cleaned up)'
+        self.get_logger().info('cleaned up: map dropped')
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state) -> TransitionCallbackReturn:
+        self.stop_work()
+        return TransitionCallbackReturn.SUCCESS
+
+    def stop_work(self, timeout: float = 2.0) -> None:
+        """Stop accepting work and end a running localization (canceled); wait for it to end."""
+        self.active = False
+        self.stopping.set()
+        if self.busy.acquire(timeout=timeout):
+            self.busy.release()
+
+    # ---- map and laser mounting --------------------------------------------------------------
     def load_map_file(self, path: str) -> None:
         try:
             self.set_map(load_map_yaml(path))
         except MapError as e:
             self.map_error = f'map not loaded: {e}'
-            self.get_logger().error(f'{self.map_error}; goals will be aborted until a map is available')
+            self.get_logger().error(f'{self.map_error}; requests are refused until a map is available')
 
     def set_map(self, occupancy_map) -> None:
-        """Use `occupancy_map` from now on, with the default matcher precomputed now, not in the first goal."""
+        """Use `occupancy_map` from now on, with the default matcher precomputed now, not in the first request."""
         localizer = Localizer(occupancy_map, self.config)
         try:
             t0 = time.perf_counter()
@@ -93,14 +161,13 @@ class GlobalLocServer(Node):
         self.localizer = localizer
 
     def on_map(self, msg: OccupancyGrid) -> None:
-        """A new map from the map topic replaces the current one (goals in flight keep theirs)."""
+        """A new map from the map topic replaces the current one (a running localization keeps its own)."""
         try:
             self.set_map(map_from_msg(msg))
         except MapError as e:
             self.map_error = f'map not loaded: {e}'
             self.get_logger().error(self.map_error)
 
-    # ---- laser mounting --------------------------------------------------------
     def _make_tf_buffer(self):
         try:
             import tf2_ros
@@ -116,15 +183,15 @@ class GlobalLocServer(Node):
         base = self.settings.base_frame
         if self.tf_buffer is not None and laser_frame:
             try:
-                t = self.tf_buffer.lookup_transform(base, laser_frame, rclpy.time.Time()).transform
+                t = self.tf_buffer.lookup_transform(base, laser_frame, Time()).transform
                 return Rigid2D(t.translation.x, t.translation.y, quaternion_to_yaw(t.rotation))
             except Exception as e:   # tf2 raises several types; any means "not known"
                 self.get_logger().warn(f'no tf {base} <- {laser_frame} ({e}); using the laser_* parameters')
         return self.config.base_T_laser
 
-    # ---- action ----------------------------------------------------------------
+    # ---- requests -------------------------------------------------------------------------
     def on_goal(self, goal_request) -> GoalResponse:
-        """Accept every goal; execute() ends it with an outcome if it cannot run."""
+        """Accept every goal; serve() ends it with an outcome if it cannot run."""
         return GoalResponse.ACCEPT
 
     def on_cancel(self, goal_handle) -> CancelResponse:
@@ -133,91 +200,122 @@ class GlobalLocServer(Node):
         return CancelResponse.ACCEPT
 
     def execute(self, goal_handle):
-        """Run one localization; always ends the goal (succeed, abort or canceled)."""
+        """The action: serve the goal, then end it as its outcome says."""
+        result = self.serve(goal_handle.request, lambda: goal_handle.is_cancel_requested,
+                            lambda progress, stage, best: goal_handle.publish_feedback(Localize.Feedback(
+                                progress=float(progress), stage=stage,
+                                best_score=float(best) if math.isfinite(best) else 0.0)))
+        if result.outcome == Outcome.LOCALIZED:
+            goal_handle.succeed()
+        elif result.outcome == Outcome.CANCELED and goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+        else:
+            goal_handle.abort()
+        return result
+
+    def on_trigger(self, request, response):
+        """std_srvs/Trigger: localize the next scan with the defaults; the outcome in one line."""
+        result = self.serve(Localize.Goal(publish_initialpose=True))
+        response.success = bool(result.success)
+        response.message = f'{Outcome(result.outcome).label}: {result.message}'
+        if len(result.hypotheses.poses):
+            p = result.pose.pose.pose
+            pose = Rigid2D(p.position.x, p.position.y, quaternion_to_yaw(p.orientation))
+            response.message += f'; {format_pose(pose)}, confidence {result.confidence:.2f}'
+        return response
+
+    def on_reinitialize(self, request, response):
+        """std_srvs/Empty (nav2's ReinitializeGlobalLocalization): the same as ~/trigger."""
+        self.serve(Localize.Goal(publish_initialpose=True))
+        return response
+
+    def serve(self, goal, cancelled=lambda: False, feedback=lambda progress, stage, best: None) -> Localize.Result:
+        """One localization, whoever asked; never raises: every end is an outcome."""
+        if not self.active:
+            return self.refuse(Outcome.NOT_ACTIVE, 'not active: the server is not in the active lifecycle state')
         if not self.busy.acquire(blocking=False):
-            return self.finish(goal_handle, ended_result(
-                Outcome.BUSY, 'busy: another goal is running (one at a time); retry when it ends'))
+            return self.refuse(Outcome.BUSY, 'busy: another localization is running (one at a time); retry when '
+                                             'it ends')
         try:
-            return self.run_goal(goal_handle)
+            return self.localize(goal, lambda: cancelled() or self.stopping.is_set(), feedback)
         except Cancelled:
-            return self.finish(goal_handle, ended_result(Outcome.CANCELED, 'canceled'))
-        except Exception as e:   # an internal error must end this goal, not the node
+            reason = 'canceled' if not self.stopping.is_set() else 'canceled: the server is stopping'
+            self.get_logger().info(reason)
+            return ended_result(Outcome.CANCELED, reason)
+        except Exception as e:   # an internal error must end this request, not the node
             self.get_logger().error(f'internal error: {e}\n{traceback.format_exc()}')
-            return self.finish(goal_handle, ended_result(Outcome.INTERNAL_ERROR,
-                                                         f'internal error: {type(e).__name__}: {e}'))
+            return ended_result(Outcome.INTERNAL_ERROR, f'internal error: {type(e).__name__}: {e}')
         finally:
             self.busy.release()
 
-    def run_goal(self, goal_handle):
-        goal = goal_handle.request
+    def refuse(self, outcome: Outcome, message: str) -> Localize.Result:
+        self.get_logger().warn(f'refused: {message}')
+        return ended_result(outcome, message)
+
+    def localize(self, goal, cancelled, feedback) -> Localize.Result:
         start = time.monotonic()
         localizer = self.localizer
         if localizer is None:
-            return self.finish(goal_handle, ended_result(Outcome.NO_MAP, self.map_error))
+            return self.refuse(Outcome.NO_MAP, self.map_error)
         method = goal.method or self.config.method
         try:
             resolve_method(method)
             check_angle_step(goal.angle_step_deg or self.config.angle_step_deg)
+            c = goal.search_center
+            region = SearchRegion(Rigid2D(c.x, c.y, c.theta), goal.search_radius_m,
+                                  math.radians(goal.search_yaw_tolerance_deg))
         except ValueError as e:    # MethodError is one
-            return self.finish(goal_handle, ended_result(Outcome.BAD_GOAL, str(e)))
+            return self.refuse(Outcome.BAD_GOAL, str(e))
         timeout = goal.timeout_s if goal.timeout_s > 0 else self.settings.scan_timeout_s
         topic = self.settings.scan_topic
-        self.get_logger().info(f'goal: method {method}, waiting up to {timeout:.1f} s for a scan on {topic}')
-        self.feedback(goal_handle, 0.0, 'waiting_for_scan', 0.0)
-        msg = self.scans.wait_after(start, timeout, lambda: goal_handle.is_cancel_requested)
+        self.get_logger().info(f'localizing: method {method}, waiting up to {timeout:.1f} s for a scan on {topic}')
+        feedback(0.0, 'waiting_for_scan', 0.0)
+        msg = self.scans.wait_after(start, timeout, cancelled)
         if msg is None:
-            return self.finish(goal_handle, ended_result(Outcome.NO_SCAN, f'no scan on {topic} within {timeout:.1f} s'))
-        self.feedback(goal_handle, 0.05, 'preparing_scan', 0.0)   # local map or points, per method
+            return self.refuse(Outcome.NO_SCAN, f'no scan on {topic} within {timeout:.1f} s')
+        feedback(0.05, 'preparing_scan', 0.0)   # local map or points, per method
         self.get_logger().info(f'matching a scan of {len(msg.ranges)} beams')
+        last = [0.0]
+
+        def progress(fraction, best):      # cancel between search steps; at most ~10 feedback messages a second
+            if cancelled():
+                raise Cancelled()
+            if time.monotonic() - last[0] > 0.1 or fraction >= 1.0:
+                last[0] = time.monotonic()
+                feedback(0.05 + 0.9 * fraction, 'matching', best)
+
+        scan = scan_from_msg(msg)
+        base_T_laser = self.base_T_laser(msg.header.frame_id)
         try:
-            result = localizer.localize(scan_from_msg(msg), method=method, angle_step_deg=goal.angle_step_deg or None,
-                                        progress=self.progress_reporter(goal_handle),
-                                        base_T_laser=self.base_T_laser(msg.header.frame_id))
+            result = localizer.localize(scan, method=method, angle_step_deg=goal.angle_step_deg or None,
+                                        progress=progress, base_T_laser=base_T_laser, region=region)
         except ScanError as e:
-            return self.finish(goal_handle, ended_result(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}'))
+            return self.refuse(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
         out = result_to_msg(result, self.settings.map_frame, msg.header.stamp, time.monotonic() - start)
+        out.scan_stamp = msg.header.stamp
+        out.scan_age_s = (self.get_clock().now() - Time.from_msg(msg.header.stamp)).nanoseconds * 1e-9
+        self.show(result, scan, base_T_laser, msg.header.stamp, localizer.map.resolution)
         summary = result.message
         if result.pose is not None:
             summary += f': {format_pose(result.pose)}, score {result.score:.3f}, {result.time_s:.2f} s'
             if goal.publish_initialpose and (result.success or goal.publish_if_ambiguous):
-                self.initialpose_pub.publish(out.pose)
+                self.pubs['initialpose'].publish(out.pose)
                 summary += f'; published on {self.settings.initialpose_topic}'
         self.get_logger().info(summary)
-        return self.finish(goal_handle, out)
+        return out
 
-    def progress_reporter(self, goal_handle):
-        """The matcher's progress callback: raises Cancelled on a cancel request, sends
-        at most ~10 feedback messages a second."""
-        last = [0.0]
-
-        def progress(fraction, best):
-            if goal_handle.is_cancel_requested:
-                raise Cancelled()
-            now = time.monotonic()
-            if now - last[0] > 0.1 or fraction >= 1.0:
-                last[0] = now
-                self.feedback(goal_handle, 0.05 + 0.9 * fraction, 'matching', best)
-        return progress
-
-    def feedback(self, goal_handle, progress: float, stage: str, best: float) -> None:
-        goal_handle.publish_feedback(Localize.Feedback(progress=float(progress), stage=stage,
-                                                       best_score=float(best) if math.isfinite(best) else 0.0))
-
-    def finish(self, goal_handle, result):
-        """End the goal as its outcome says, logging why when it did not succeed."""
-        if result.outcome == Outcome.LOCALIZED:
-            goal_handle.succeed()
-        elif result.outcome == Outcome.CANCELED:
-            self.get_logger().info('goal canceled')
-            goal_handle.canceled()
-        else:
-            self.get_logger().warn(f'goal aborted: {result.message}')
-            goal_handle.abort()
-        return result
+    def show(self, result, scan, base_T_laser: Rigid2D, stamp, resolution: float) -> None:
+        """The RViz topics for this localization."""
+        frame = self.settings.map_frame
+        self.pubs['hypotheses'].publish(hypotheses_msg(result, frame, stamp))
+        self.pubs['markers'].publish(markers_msg(result, frame, stamp))
+        if result.pose is not None:
+            self.pubs['local_map'].publish(local_map_msg(scan_to_points(scan), resolution, self.config.opening_kernel,
+                                                         result.pose * base_T_laser, frame, stamp))
 
 
 def main(args=None):
-    # Four threads: a running goal never starves the scan, cancel and goal callbacks.
+    # Four threads: a running localization never starves the scan, cancel, service and lifecycle callbacks.
     sys.exit(run_node(GlobalLocServer, lambda: MultiThreadedExecutor(num_threads=4), args=args))
 
 

@@ -19,6 +19,7 @@ import numpy as np
 from ..map_io import OccupancyMap
 from ..outcome import Outcome
 from ..scan import ScanPoints
+from ..search_region import SearchRegion
 from ..transform import Rigid2D
 
 ProgressFn = Callable[[float, float], None]
@@ -77,6 +78,9 @@ class MatchOptions:
     angle_step_deg: float = 5.0
     opening_kernel: int = 3
     peaks_per_angle: int = 3
+    # Where the laser may be; a matcher may use it to search less (the Localizer drops
+    # candidates outside the robot's region in any case).
+    region: Optional[SearchRegion] = None
 
 
 class Matcher(ABC):

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..local_grid import build_local_grid, soften
 from ..pose import pose_from_match, rotation_px, translation_px
+from ..transform import normalize_angle
 from .base import Candidate, Match, Matcher
 
 
@@ -33,24 +34,53 @@ class RotatedTemplateMatcher(Matcher):
 
     def match(self, points, options, progress=None):
         local = build_local_grid(points, self.map.resolution, options.opening_kernel)
-        angles = np.arange(0.0, 360.0, options.angle_step_deg)
+        angles = self.angles(options)
+        laser = np.array([*local.laser_px, 1.0])
         candidates, best = [], -np.inf
         for i, angle in enumerate(angles):
             templ, local_to_templ = rotate_tight(local.image, angle)
             templ = self.blur(templ)
-            image, pad = pad_to_fit(self.map_image, templ.shape)
+            window, (ox, oy) = self.search_window(templ.shape, (local_to_templ @ laser)[:2], options.region)
+            if window.size == 0:     # the prior's disc lies off the map
+                continue
+            image, pad = pad_to_fit(window, templ.shape)
             scores = cv2.matchTemplate(image, templ, self.cv_method)
             if self.cv_method in (cv2.TM_SQDIFF, cv2.TM_SQDIFF_NORMED):
                 scores = 1.0 - scores
             scores = np.nan_to_num(scores, nan=-1.0, posinf=-1.0, neginf=-1.0)
             for score, (mx, my) in top_peaks(scores, options.peaks_per_angle, self.peak_radius_px):
-                a = translation_px(mx - pad[0], my - pad[1]) @ local_to_templ
+                a = translation_px(mx - pad[0] + ox, my - pad[1] + oy) @ local_to_templ
                 candidates.append(Candidate(pose_from_match(self.map, local, a), float(score)))
                 best = max(best, score)
             if progress:
                 progress((i + 1) / len(angles), float(best))
         candidates.sort(key=lambda c: -c.score)
         return Match(candidates)
+
+    def angles(self, options) -> np.ndarray:
+        """The template's rotations (deg): every angle step over 360 deg, or those within
+        the prior's heading window (a rotation by a turns the laser to map yaw origin + a)."""
+        angles = np.arange(0.0, 360.0, options.angle_step_deg)
+        region = options.region
+        if region is None or not 0 < region.yaw_tolerance < math.pi:
+            return angles
+        off = np.abs(normalize_angle(np.radians(angles) + self.map.origin.yaw - region.center.yaw))
+        return angles[off <= region.yaw_tolerance + math.radians(options.angle_step_deg) / 2]
+
+    def search_window(self, templ_shape, laser_in_templ, region):
+        """The part of the map image the template's placements may cover when the laser
+        must lie in the prior's disc, and its (left, top) offset; the whole image without one."""
+        if region is None or region.radius_m <= 0:
+            return self.map_image, (0, 0)
+        uc, vc = self.map.frame.world_to_pixel([[region.center.x, region.center.y]])[0]
+        reach = region.radius_m / self.map.resolution + 1
+        th, tw = templ_shape
+        h, w = self.map_image.shape
+        x0 = int(np.clip(np.floor(uc - reach - laser_in_templ[0]), 0, w))
+        y0 = int(np.clip(np.floor(vc - reach - laser_in_templ[1]), 0, h))
+        x1 = int(np.clip(np.ceil(uc + reach - laser_in_templ[0]) + tw, x0, w))
+        y1 = int(np.clip(np.ceil(vc + reach - laser_in_templ[1]) + th, y0, h))
+        return self.map_image[y0:y1, x0:x1], (x0, y0)
 
 
 def rotate_tight(image: np.ndarray, angle_deg: float):

@@ -34,8 +34,10 @@ ScanTables = namedtuple('ScanTables', 'base du dv row_start')
 # flags[offsets[h] + (v >> h) * width[h] + (u >> h)]: level-h block (u, v) holds a free cell.
 FreeBlocks = namedtuple('FreeBlocks', 'flags offsets width')
 # The map's size in cells, the number of leaf angles, and keep: nodes bounded at or above
-# keep x the best leaf are expanded.
-SearchSpace = namedtuple('SearchSpace', 'map_w map_h n_angles keep')
+# keep x the best leaf are expanded. The search prior: only nodes with a cell within
+# region_r cells of pixel (region_u, region_v) and an angle within region_w angle steps of
+# angle index region_a; region_r < 0 / region_w < 0: no bound.
+SearchSpace = namedtuple('SearchSpace', 'map_w map_h n_angles keep region_u region_v region_r region_a region_w')
 
 
 @njit(cache=True, nogil=True, inline='always')
@@ -83,6 +85,31 @@ def node_bounds(planes, tables, tu, tv, ta, h):
     for k in range(len(tu)):
         point_values(planes, tables, tu[k], tv[k], ta[k], h, terms)
         out[k] = terms.sum()
+    return out
+
+
+@njit(cache=True, nogil=True, inline='always')
+def in_region(space, u, v, a, h):
+    """Whether node (u, v, a, h) holds a pose of the search prior."""
+    size = 1 << h
+    if space.region_r >= 0:
+        dx = max(u - 0.5 - space.region_u, 0.0, space.region_u - (u + size - 0.5))
+        dy = max(v - 0.5 - space.region_v, 0.0, space.region_v - (v + size - 0.5))
+        if dx * dx + dy * dy > space.region_r * space.region_r:
+            return False
+    if space.region_w >= 0:
+        ahead = (space.region_a - a) % space.n_angles      # from the node's first angle to the window's centre
+        if ahead > size - 1 and min(ahead - (size - 1), space.n_angles - ahead) > space.region_w:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def region_mask(space, tu, tv, ta, h):
+    """in_region for each node (tu, tv, ta) at level h."""
+    out = np.empty(len(tu), np.bool_)
+    for k in range(len(tu)):
+        out[k] = in_region(space, tu[k], tv[k], ta[k], h)
     return out
 
 
@@ -225,6 +252,8 @@ def search_step(planes, tables, free, space, heap, shared_best, budget, per_leve
                 continue
             if free.flags[free.offsets[h - 1] + (cv >> (h - 1)) * free.width[h - 1] + (cu >> (h - 1))] == 0:
                 continue
+            if not in_region(space, cu, cv, ca, h - 1):
+                continue
             cb = child_bound(planes, tables, cu, cv, ca, h - 1, parent, parent_rest, int(math.ceil(keep * best)))
             if h == 1:      # a leaf: its exact score
                 if cb > best:
@@ -271,7 +300,9 @@ def warm_up() -> None:
     tables = ScanTables(np.zeros((2, 1), np.int64), du, du, np.array([0, 2], np.int64))
     top = np.zeros((1, 4), np.int64)
     node_bounds(planes, tables, top[:, 0], top[:, 1], top[:, 2], 1)
-    search_step(planes, tables, FreeBlocks(np.ones(32, np.uint8), zeros, widths), SearchSpace(2, 2, 2, 0.9),
+    space = SearchSpace(2, 2, 2, 0.9, 0.0, 0.0, -1.0, 0.0, -1.0)
+    search_step(planes, tables, FreeBlocks(np.ones(32, np.uint8), zeros, widths), space,
                 make_heap(top, 1), np.zeros(1, np.int64), 10, np.zeros(2, np.int64))
+    region_mask(space, top[:, 0], top[:, 1], top[:, 2], 1)
     split_heap(*make_heap(top, 1))
     offset_tables(np.zeros(1), np.zeros(1), np.zeros(1))

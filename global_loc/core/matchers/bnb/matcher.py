@@ -26,10 +26,11 @@ import numpy as np
 from ...map_io import OccupancyMap
 from ...pixel_kernels import warm_up as warm_up_pixel_kernels
 from ...scan import ScanPoints
+from ...search_region import SearchRegion
 from ..base import Candidate, Match, Matcher, MatchOptions, ProgressFn, distinct
 from .free_space import see_through_fractions
 from .grids import PrecomputationGridStack
-from .kernels import ScanTables, SearchSpace, node_bounds, offset_tables
+from .kernels import ScanTables, SearchSpace, node_bounds, offset_tables, region_mask
 from .kernels import warm_up as warm_up_search
 from .options import BranchAndBoundOptions
 from .refine import bin_maxima, landscape_covariance, refine
@@ -109,13 +110,13 @@ class BranchAndBoundMatcher(Matcher):
         gu, gv, ga = np.meshgrid(np.arange(0, self.map.width, step), np.arange(0, self.map.height, step),
                                  np.arange(0, n_angles, step), indexing='ij')
         tu, tv, ta = gu.ravel(), gv.ravel(), ga.ravel()
-        keep = self.stack.free_block(top, tu, tv)
+        space = self.search_space(n_angles, options.region)
+        keep = self.stack.free_block(top, tu, tv) & region_mask(space, tu, tv, ta, top)
         tu, tv, ta = tu[keep], tv[keep], ta[keep]
         if len(tu) == 0:
             return Match([])
         # 2. Branch and bound down to keep_ratio x the best leaf.
         tables = self.tables(pts, d0, n_angles)
-        space = SearchSpace(self.map.width, self.map.height, n_angles, opt.keep_ratio)
         bounds = node_bounds(self.stack.planes, tables, tu, tv, ta, top)
         leaves, per_level, exact = self.searcher.run(
             self.stack.planes, tables, self.stack.free, space,
@@ -129,6 +130,19 @@ class BranchAndBoundMatcher(Matcher):
         if progress:
             progress(1.0, candidates[0].score if candidates else 0.0)
         return Match(candidates, stats)
+
+    def search_space(self, n_angles: int, region: Optional[SearchRegion]) -> SearchSpace:
+        """The search's bounds: the map, the leaf angles, and the prior (in pixels and angle steps)."""
+        u = v = a = 0.0
+        r = w = -1.0
+        if region is not None:
+            u, v, yaw = self.map.frame.world_pose_to_pixel(region.center)
+            d0 = 2 * math.pi / n_angles
+            if region.radius_m > 0:
+                r = region.radius_m / self.map.resolution
+            if 0 < region.yaw_tolerance < math.pi:
+                a, w = (yaw / d0) % n_angles, region.yaw_tolerance / d0
+        return SearchSpace(self.map.width, self.map.height, n_angles, self.options.keep_ratio, u, v, r, a, w)
 
     def refine_peaks(self, tu, tv, ta, scores, pts, d0, points: ScanPoints) -> list[Candidate]:
         """The distinct peaks among the leaves, refined, ranked by field score x (1 -

@@ -1,0 +1,44 @@
+"""A search prior: where the robot may be (a disc around a pose) and which way it may
+face (a window around that pose's heading). A user who knows the robot is "in this
+room" or "facing roughly north" excludes the rest of the map, which both settles
+ambiguities the scan alone cannot and shrinks the search.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .transform import Rigid2D, normalize_angle
+
+
+@dataclass(frozen=True)
+class SearchRegion:
+    center: Rigid2D
+    radius_m: float = 0.0          # 0: anywhere on the map
+    yaw_tolerance: float = 0.0     # rad; 0: any heading
+
+    def __post_init__(self):
+        values = (*self.center.as_tuple(), self.radius_m, self.yaw_tolerance)
+        if not all(math.isfinite(v) for v in values):
+            raise ValueError(f'search region values must be finite, got {values}')
+        if self.radius_m < 0 or self.yaw_tolerance < 0:
+            raise ValueError(f'search radius and yaw tolerance must be >= 0, got {self.radius_m}, '
+                             f'{self.yaw_tolerance}')
+
+    @property
+    def bounded(self) -> bool:
+        """Whether the region excludes anything."""
+        return self.radius_m > 0 or 0 < self.yaw_tolerance < math.pi
+
+    def contains(self, pose: Rigid2D) -> bool:
+        if self.radius_m > 0 and math.hypot(pose.x - self.center.x, pose.y - self.center.y) > self.radius_m:
+            return False
+        return not (0 < self.yaw_tolerance and abs(normalize_angle(pose.yaw - self.center.yaw)) > self.yaw_tolerance)
+
+    def for_laser(self, base_T_laser: Rigid2D) -> 'SearchRegion':
+        """The region the laser lies in when the base lies in this one: the disc widened
+        by the laser's offset (the base's heading turns it), the heading window turned by
+        the laser's mounting yaw."""
+        offset = math.hypot(base_T_laser.x, base_T_laser.y)
+        return SearchRegion(Rigid2D(self.center.x, self.center.y, self.center.yaw + base_T_laser.yaw),
+                            self.radius_m + offset if self.radius_m > 0 else 0.0, self.yaw_tolerance)
