@@ -66,7 +66,7 @@ fi
 # ---- 3. colcon build ---------------------------------------------------------
 # Python sources are symlinked (--symlink-install), so editing global_loc/*.py needs
 # no rebuild; only the package metadata, entry points, maps and the interfaces do.
-build_inputs=$(ls package.xml setup.py setup.cfg resource/* maps/* \
+build_inputs=$(ls package.xml setup.py setup.cfg resource/* maps/* config/* launch/* \
     global_loc_interfaces/package.xml global_loc_interfaces/CMakeLists.txt \
     global_loc_interfaces/action/* 2>/dev/null || true)
 build_stamp="$ROOT/install/.global_loc_build"

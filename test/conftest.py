@@ -1,13 +1,16 @@
-"""Helpers shared by the tests: where the data is, pose assertions, and small synthetic
-maps built for one property each (no symmetry, four-fold symmetry, twin aisles, twin
-rooms)."""
+"""Helpers shared by the tests: where the data is, pose assertions, the client and a scan
+publisher for the ROS tests, and small synthetic maps built for one property each (no
+symmetry, four-fold symmetry, twin aisles, twin rooms)."""
+import json
 import os
+import sys
 
 import numpy as np
 import pytest
 
 from global_loc.core.map_io import from_occupancy_grid, load_map_yaml
 from global_loc.core.transform import CORRECT_XY_M, CORRECT_YAW_DEG, Rigid2D, pose_correct, pose_error
+from global_loc.ros.processes import Process, run_client
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TEST_DIR = os.path.join(REPO_ROOT, 'test')
@@ -101,3 +104,26 @@ def twin_rooms(door_b_closed: bool, chair_in: str):
     cx = {'A': 5.0, 'B': 19.0}[chair_in]
     occ(cx, cx + 0.3, 4.2, 4.5)
     return grid_map(grid, res)
+
+
+# ---- ROS processes -----------------------------------------------------------------------
+TRUTH = Rigid2D(3.0, 4.0, 0.7)     # an office place every matcher but features gets right (test_matchers)
+
+
+def localize(env, *args, timeout=120.0):
+    """The client with --json: (exit code, its result as a dict)."""
+    out = run_client(env, '--json', *args, timeout=timeout)
+    assert out.stdout.strip(), out.stderr
+    return out.returncode, json.loads(out.stdout)
+
+
+def pose_of(result: dict) -> Rigid2D:
+    return Rigid2D(result['pose']['x'], result['pose']['y'], result['pose']['yaw'])
+
+
+def start_scan_publisher(env, log_path, map_yaml, pose: Rigid2D, rate=5.0) -> Process:
+    """test/scan_publisher.py: scans ray-cast at `pose` (numpy, not the simulator)."""
+    return Process([sys.executable, os.path.join(TEST_DIR, 'scan_publisher.py'), str(map_yaml),
+                    *map(str, pose.as_tuple()), str(rate)], env, log_path)
+
+

@@ -1,20 +1,17 @@
 """The action server, the client and /initialpose in separate processes over real DDS.
 The client's --json result (outcome, pose, ...) is what the tests read."""
 import json
-import os
 import subprocess
-import sys
 import time
 
 import pytest
 from geometry_msgs.msg import PoseWithCovarianceStamped
 
-from conftest import OFFICE_YAML, TEST_DIR, assert_pose_near, symmetric_room
+from conftest import OFFICE_YAML, TRUTH, assert_pose_near, localize, pose_of, start_scan_publisher, symmetric_room
 from global_loc.core.outcome import Outcome
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import pose_from_msg
 from global_loc.ros.processes import (
-    Process,
     TopicRecorder,
     isolated_env,
     reliable,
@@ -22,25 +19,6 @@ from global_loc.ros.processes import (
     start_client,
     start_server,
 )
-
-TRUTH = Rigid2D(3.0, 4.0, 0.7)     # a place every matcher but features gets right; see test_matchers
-
-
-def localize(env, *args, timeout=120.0):
-    """The client with --json: (exit code, its result as a dict)."""
-    out = run_client(env, '--json', *args, timeout=timeout)
-    assert out.stdout.strip(), out.stderr
-    return out.returncode, json.loads(out.stdout)
-
-
-def pose_of(result: dict) -> Rigid2D:
-    return Rigid2D(result['pose']['x'], result['pose']['y'], result['pose']['yaw'])
-
-
-def start_scan_publisher(env, log_path, map_yaml, pose: Rigid2D, rate=5.0) -> Process:
-    """test/scan_publisher.py: scans ray-cast at `pose` (numpy, not the simulator)."""
-    return Process([sys.executable, os.path.join(TEST_DIR, 'scan_publisher.py'), str(map_yaml),
-                    *map(str, pose.as_tuple()), str(rate)], env, log_path)
 
 
 def initialpose_listener(env) -> TopicRecorder:

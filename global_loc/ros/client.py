@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 
 import rclpy
 from action_msgs.msg import GoalStatus
+from geometry_msgs.msg import Pose2D
 from rclpy.action import ActionClient
 from rclpy.executors import ExternalShutdownException
 
@@ -37,6 +39,11 @@ def parse_args(argv):
     parser.add_argument('--server-timeout', type=float, default=10.0, help='seconds to wait for the server')
     parser.add_argument('--cancel-after', type=float, default=0.0, help='cancel the goal after this many seconds')
     parser.add_argument('--action', default='localize', help='action name')
+    parser.add_argument('--near', type=float, nargs=3, metavar=('X', 'Y', 'YAW_DEG'), default=(0.0, 0.0, 0.0),
+                        help='search prior: the centre (map frame, degrees) of --radius and --yaw-tolerance')
+    parser.add_argument('--radius', type=float, default=0.0, help='search only within this many metres of --near')
+    parser.add_argument('--yaw-tolerance', type=float, default=0.0,
+                        help="search only headings within this many degrees of --near's")
     parser.add_argument('--json', action='store_true',
                         help='print only the result, as one JSON object (outcome, pose, covariance, ...)')
     return parser.parse_args(argv)
@@ -49,7 +56,9 @@ def run(node, args) -> int:
               f'(is `ros2 run global_loc server` running, with the same ROS_DOMAIN_ID?)', file=sys.stderr)
         return 2
     goal = Localize.Goal(method=args.method, angle_step_deg=args.angle_step, timeout_s=args.timeout,
-                         publish_initialpose=not args.no_publish, publish_if_ambiguous=args.publish_if_ambiguous)
+                         publish_initialpose=not args.no_publish, publish_if_ambiguous=args.publish_if_ambiguous,
+                         search_center=Pose2D(x=args.near[0], y=args.near[1], theta=math.radians(args.near[2])),
+                         search_radius_m=args.radius, search_yaw_tolerance_deg=args.yaw_tolerance)
     last_stage = ['']
 
     def on_feedback(fb):

@@ -112,6 +112,7 @@ def result_to_dict(result: Localize.Result, status: str) -> dict:
     out = {'outcome': outcome, 'status': status, 'success': bool(result.success), 'message': result.message,
            'score': float(result.score) if math.isfinite(result.score) else None,
            'confidence': float(result.confidence), 'elapsed_s': float(result.elapsed_s), 'hypotheses': hypotheses,
+           'scan_stamp': result.scan_stamp.sec + 1e-9 * result.scan_stamp.nanosec, 'scan_age_s': result.scan_age_s,
            'pose': None, 'covariance': None}
     if hypotheses:
         out['pose'] = pose_from_msg(result.pose.pose.pose).as_dict()

@@ -40,7 +40,7 @@ def declare_server_parameters(node: Node) -> tuple[ServerSettings, LocalizerConf
 
     settings = ServerSettings(
         autostart=param('autostart', True, 'configure and activate on start (false: a lifecycle manager does)'),
-        map_yaml=param('map_yaml', default_map_yaml(), 'nav2 map YAML to localize in (default: the shipped map)'),
+        map_yaml=param('map_yaml', '', 'nav2 map YAML to localize in (empty: the shipped map)') or default_map_yaml(),
         use_map_topic=param('use_map_topic', False, 'take the map from an OccupancyGrid topic instead of map_yaml'),
         map_topic=param('map_topic', '/map', 'OccupancyGrid topic (transient local, like nav2 map_server)'),
         scan_topic=param('scan_topic', '/scan', 'sensor_msgs/LaserScan topic'),

@@ -72,9 +72,12 @@ class Process:
         return self.proc.returncode
 
 
-def start_node(env, log_path, executable: str, ready_line: str, *params) -> Process:
-    """`ros2 run global_loc EXECUTABLE --ros-args -p NAME:=VALUE ...`, once it logged `ready_line`."""
+def start_node(env, log_path, executable: str, ready_line: str, *params, params_file=None) -> Process:
+    """`ros2 run global_loc EXECUTABLE --ros-args [--params-file F] -p NAME:=VALUE ...`, once it
+    logged `ready_line`."""
     args = [ros2(), 'run', 'global_loc', executable, '--ros-args']
+    if params_file:
+        args += ['--params-file', str(params_file)]
     for p in params:
         args += ['-p', p]
     node = Process(args, env, log_path)
@@ -82,8 +85,8 @@ def start_node(env, log_path, executable: str, ready_line: str, *params) -> Proc
     return node
 
 
-def start_server(env, log_path, *params) -> Process:
-    return start_node(env, log_path, 'server', 'ready: action', *params)
+def start_server(env, log_path, *params, params_file=None, ready_line='ready: action') -> Process:
+    return start_node(env, log_path, 'server', ready_line, *params, params_file=params_file)
 
 
 def start_sim(env, log_path, *params) -> Process:

@@ -1,0 +1,189 @@
+"""The server as a nav2 robot has it, in real processes over DDS: lifecycle transitions
+(lifecycle_msgs services, as nav2's lifecycle_manager calls them), the std_srvs triggers,
+the RViz topics, the parameters file and search priors through the action."""
+import json
+import os
+import subprocess
+import time
+
+import pytest
+import yaml
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState, GetState
+from nav_msgs.msg import OccupancyGrid
+from std_srvs.srv import Empty, Trigger
+from visualization_msgs.msg import Marker, MarkerArray
+
+from conftest import (
+    OFFICE_YAML,
+    REPO_ROOT,
+    TRUTH,
+    assert_pose_near,
+    localize,
+    pose_of,
+    start_scan_publisher,
+    symmetric_room,
+)
+from global_loc.core.map_io import save_map_yaml
+from global_loc.core.transform import Rigid2D
+from global_loc.ros.convert import pose_from_msg
+from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, start_client, start_server
+
+PARAMS_FILE = os.path.join(REPO_ROOT, 'config', 'global_loc.yaml')
+
+
+def call(recorder: TopicRecorder, srv_type, name: str, request, timeout: float = 30.0):
+    """A service call from the recorder's node (its executor spins in a thread)."""
+    client = recorder.node.create_client(srv_type, name)
+    assert client.wait_for_service(timeout_sec=10.0), f'no service {name}'
+    future = client.call_async(request)
+    deadline = time.monotonic() + timeout
+    while not future.done() and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert future.done(), f'{name} did not answer within {timeout} s'
+    return future.result()
+
+
+def transition(recorder, transition_id: int) -> bool:
+    return call(recorder, ChangeState, '/global_loc_server/change_state',
+                ChangeState.Request(transition=Transition(id=transition_id))).success
+
+
+def state(recorder) -> str:
+    return call(recorder, GetState, '/global_loc_server/get_state', GetState.Request()).current_state.label
+
+
+@pytest.fixture
+def ros(tmp_path):
+    """A private domain with a scan publisher at TRUTH and a recorder node; stops what it started."""
+    env = isolated_env()
+    recorder = TopicRecorder(env, {'/initialpose': (PoseWithCovarianceStamped, reliable())}, 'test_nav2')
+    publisher = start_scan_publisher(env, tmp_path / 'pub.log', OFFICE_YAML, TRUTH)
+    servers = []
+    yield env, recorder, servers
+    for server in servers:
+        assert server.stop() == 0, server.output()
+    publisher.stop()
+    recorder.close()
+
+
+def test_lifecycle_manager_drives_a_server_started_without_autostart(ros, tmp_path):
+    env, recorder, servers = ros
+    servers.append(start_server(env, tmp_path / 'server.log', 'autostart:=false', ready_line='unconfigured'))
+    assert state(recorder) == 'unconfigured'
+    code, result = localize(env, '--timeout', '10')
+    assert code == 1 and result['outcome'] == 'not_active', result
+    assert transition(recorder, Transition.TRANSITION_CONFIGURE) and state(recorder) == 'inactive'
+    assert localize(env, '--timeout', '10')[1]['outcome'] == 'not_active'
+    assert transition(recorder, Transition.TRANSITION_ACTIVATE) and state(recorder) == 'active'
+    code, result = localize(env, '--timeout', '10')
+    assert code == 0 and result['outcome'] == 'localized', result
+    assert transition(recorder, Transition.TRANSITION_DEACTIVATE) and state(recorder) == 'inactive'
+    assert localize(env, '--timeout', '10')[1]['outcome'] == 'not_active'
+    assert transition(recorder, Transition.TRANSITION_CLEANUP) and state(recorder) == 'unconfigured'
+    assert 'cleaned up: map dropped' in servers[0].output()
+
+
+def test_deactivate_during_a_goal_ends_it_and_refuses_the_next(ros, tmp_path):
+    env, recorder, servers = ros
+    server = start_server(env, tmp_path / 'server.log')
+    servers.append(server)
+    slow = start_client(env, '--json', '--method', 'template_ccoeff', '--angle-step', '0.5', '--timeout', '10',
+                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 30
+    while 'matching a scan' not in server.output() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    t0 = time.monotonic()
+    assert transition(recorder, Transition.TRANSITION_DEACTIVATE)
+    assert time.monotonic() - t0 < 5.0
+    out, err = slow.communicate(timeout=30)
+    result = json.loads(out)
+    assert result['outcome'] == 'canceled' and 'stopping' in result['message'], (result, err)
+    assert localize(env)[1]['outcome'] == 'not_active'
+    assert transition(recorder, Transition.TRANSITION_ACTIVATE)
+    assert localize(env, '--timeout', '10')[0] == 0
+
+
+def test_trigger_services_localize_and_publish_and_rviz_topics_reach_a_late_subscriber(ros, tmp_path):
+    env, recorder, servers = ros
+    servers.append(start_server(env, tmp_path / 'server.log'))
+    assert recorder.wait_for_publisher('/initialpose')
+    reply = call(recorder, Trigger, '/global_loc_server/trigger', Trigger.Request())
+    assert reply.success and reply.message.startswith('localized: localized; x='), reply.message
+    published = recorder.wait_for('/initialpose', 1)
+    assert len(published) == 1
+    assert_pose_near(pose_from_msg(published[0].pose.pose), TRUTH)
+    call(recorder, Empty, '/global_loc_server/reinitialize_global_localization', Empty.Request())
+    assert len(recorder.wait_for('/initialpose', 2)) == 2
+    # RViz joining now still gets the last localization (transient local, depth 1)
+    latched = reliable(depth=1, latched=True)
+    late = TopicRecorder(env, {'/global_loc_server/hypotheses': (PoseArray, latched),
+                               '/global_loc_server/hypothesis_markers': (MarkerArray, latched),
+                               '/global_loc_server/local_map': (OccupancyGrid, latched)}, 'late_rviz')
+    try:
+        hypotheses = late.wait_for('/global_loc_server/hypotheses', 1)
+        markers = late.wait_for('/global_loc_server/hypothesis_markers', 1)
+        local_map = late.wait_for('/global_loc_server/local_map', 1)
+        assert len(hypotheses) == len(markers) == len(local_map) == 1
+        assert hypotheses[0].header.frame_id == 'map'
+        assert_pose_near(pose_from_msg(hypotheses[0].poses[0]), TRUTH)
+        arrows = [m for m in markers[0].markers if m.action == Marker.ADD and m.type == Marker.ARROW]
+        assert len(arrows) == len(hypotheses[0].poses) and arrows[0].color.g > arrows[0].color.r   # chosen: green
+        grid = local_map[0]
+        assert grid.header.frame_id == 'map' and grid.info.resolution == pytest.approx(0.05)
+        assert sum(v == 100 for v in grid.data) > 100 and set(grid.data) <= {100, -1}
+    finally:
+        late.close()
+
+
+def test_parameters_file_is_read_and_lists_every_parameter(ros, tmp_path):
+    """The shipped file starts a working server; a copy with one value changed changes it."""
+    env, recorder, servers = ros
+    servers.append(start_server(env, tmp_path / 'server.log', params_file=PARAMS_FILE))
+    assert localize(env, '--timeout', '10')[0] == 0
+    assert servers.pop().stop() == 0
+    doc = yaml.safe_load(open(PARAMS_FILE))
+    doc['global_loc_server']['ros__parameters']['bnb']['max_nodes'] = 50
+    changed = tmp_path / 'changed.yaml'
+    changed.write_text(yaml.safe_dump(doc))
+    servers.append(start_server(env, tmp_path / 'server2.log', params_file=changed))
+    code, result = localize(env, '--timeout', '10')
+    assert code == 1 and result['outcome'] == 'search_incomplete', result
+
+
+def test_parameters_file_has_every_declared_parameter_with_its_default():
+    """Against the declarations themselves (declare_server_parameters, run on a recorder)."""
+    from global_loc.ros.parameters import declare_server_parameters
+
+    class Declared:
+        def __init__(self):
+            self.values = {}
+
+        def declare_parameter(self, name, value, descriptor):
+            self.values[name] = value
+            return type('Parameter', (), {'value': value})
+
+    declared = Declared()
+    declare_server_parameters(declared)
+    params = yaml.safe_load(open(PARAMS_FILE))['global_loc_server']['ros__parameters']
+    flat = {f'bnb.{k}': v for k, v in params.pop('bnb').items()} | params
+    assert flat == pytest.approx(declared.values)
+
+
+def test_search_prior_settles_a_symmetric_room(tmp_path):
+    """Four-fold symmetric: ambiguous alone, localized with a prior of the right quarter."""
+    save_map_yaml(symmetric_room(), tmp_path / 'square.yaml')
+    env = isolated_env()
+    truth = Rigid2D(2.0, 1.4, 0.4)
+    server = start_server(env, tmp_path / 'server.log', f'map_yaml:={tmp_path / "square.yaml"}')
+    publisher = start_scan_publisher(env, tmp_path / 'pub.log', tmp_path / 'square.yaml', truth)
+    try:
+        assert localize(env, '--timeout', '10')[1]['outcome'] == 'ambiguous'
+        code, result = localize(env, '--timeout', '10', '--near', '1.5', '1.5', '0', '--radius', '1.5')
+        assert code == 0 and result['outcome'] == 'localized', result
+        assert_pose_near(pose_of(result), truth)
+        assert 0 <= result['scan_age_s'] < 5 and result['scan_stamp'] > 0
+    finally:
+        publisher.stop()
+        assert server.stop() == 0
