@@ -25,49 +25,68 @@ from .core.transform import Rigid2D, pose_error
 from .sim.raycast import sample_free_poses, simulate_scan
 
 
+def json_line_scans(path: str):
+    """(where, Scan or the ScanError, truth or None) per non-empty line of a JSON-lines file
+    ('-': stdin). Bytes that are not UTF-8 make that line an error, not the run's end."""
+    stream = sys.stdin.buffer if path == '-' else open(path, 'rb')
+    with stream:
+        for lineno, raw in enumerate(stream, 1):
+            where = {'line': lineno}
+            try:
+                line = raw.decode('utf-8-sig' if lineno == 1 else 'utf-8')
+                if not line.strip():
+                    continue
+                obj = json.loads(line)
+                if not isinstance(obj, dict):
+                    raise ScanError('expected a JSON object with LaserScan fields')
+                yield where, Scan.from_dict(obj), obj.get('truth')
+            except (UnicodeDecodeError, json.JSONDecodeError, ScanError) as e:
+                yield where, ScanError(f'line {lineno}: {e}'), None
+
+
+def bag_scans(path: str, topic: str, every: int):
+    """(where, Scan, None) per LaserScan of a rosbag2 recording."""
+    from .bagfile import read_scans
+    for index, scan in read_scans(path, topic, every):
+        yield {'index': index, 'stamp': round(scan.stamp, 9)}, scan, None
+
+
 def localize_main(args) -> int:
     occupancy_map = load_map_yaml(args.map)
     bnb = BranchAndBoundOptions(**{name: getattr(args, f'bnb_{name}') for name, *_ in option_fields()})
     config = LocalizerConfig(method=args.method, angle_step_deg=args.angle_step, opening_kernel=args.opening_kernel,
                              bnb=bnb)
     localizer = Localizer(occupancy_map, config)
-    localizer.matcher(args.method)   # unknown method: fail before reading any scan
-    stream = sys.stdin if args.scans == '-' else open(args.scans)
-    with stream:
-        for lineno, line in enumerate(stream, 1):
-            if not line.strip():
-                continue
-            out = {'line': lineno, 'method': localizer.matcher(args.method).name}
-            try:
-                obj = json.loads(line)
-                if not isinstance(obj, dict):
-                    raise ScanError('expected a JSON object with LaserScan fields')
-                scan = Scan.from_dict(obj)
-                result = localizer.localize(scan)
-            except (json.JSONDecodeError, ScanError) as e:
-                out.update(outcome=Outcome.UNUSABLE_SCAN.label, error=f'line {lineno}: {e}')
-                print(json.dumps(out), flush=True)
-                continue
-            if result.pose is not None:
-                out.update(result.pose.as_dict())
-            out.update(outcome=result.outcome.label,
-                       score=round(result.score, 5) if math.isfinite(result.score) else None,
-                       success=result.success, confidence=round(result.confidence, 4),
-                       time_s=round(result.time_s, 4), message=result.message,
-                       hypotheses=[{**h.pose.as_dict(), 'score': round(h.score, 5)} for h in result.hypotheses])
-            truth = obj.get('truth')
-            if truth is not None and result.pose is not None:
-                t = Rigid2D(truth['x'], truth['y'], truth['yaw'])
-                d, a = pose_error(result.pose, t)
-                out.update(truth=t.as_dict(), error_xy=round(d, 4), error_yaw_deg=round(a, 3))
-            print(json.dumps(out), flush=True)
-            if args.plot:
-                stem, ext = os.path.splitext(args.plot)
-                path = args.plot if lineno == 1 else f'{stem}_{lineno:03d}{ext or ".png"}'
-                from .plot import plot_localization
-                plot_localization(path, occupancy_map, scan_to_points(scan).points, result.pose,
-                                  Rigid2D(truth['x'], truth['y'], truth['yaw']) if truth else None,
-                                  result.hypotheses, title=f'{out["method"]}: {result.message}')
+    method = localizer.matcher(args.method).name   # unknown method: fail before reading any scan
+    scans = bag_scans(args.bag, args.topic, args.every) if args.bag else json_line_scans(args.scans)
+    for n, (where, scan, truth) in enumerate(scans, 1):
+        out = {**where, 'method': method}
+        try:
+            if isinstance(scan, ScanError):
+                raise scan
+            result = localizer.localize(scan)
+        except ScanError as e:
+            print(json.dumps({**out, 'outcome': Outcome.UNUSABLE_SCAN.label, 'error': str(e)}), flush=True)
+            continue
+        if result.pose is not None:
+            out.update(result.pose.as_dict())
+        out.update(outcome=result.outcome.label,
+                   score=round(result.score, 5) if math.isfinite(result.score) else None,
+                   success=result.success, confidence=round(result.confidence, 4),
+                   time_s=round(result.time_s, 4), message=result.message,
+                   hypotheses=[{**h.pose.as_dict(), 'score': round(h.score, 5)} for h in result.hypotheses])
+        if truth is not None and result.pose is not None:
+            t = Rigid2D(truth['x'], truth['y'], truth['yaw'])
+            d, a = pose_error(result.pose, t)
+            out.update(truth=t.as_dict(), error_xy=round(d, 4), error_yaw_deg=round(a, 3))
+        print(json.dumps(out), flush=True)
+        if args.plot:
+            stem, ext = os.path.splitext(args.plot)
+            path = args.plot if n == 1 else f'{stem}_{n:03d}{ext or ".png"}'
+            from .plot import plot_localization
+            plot_localization(path, occupancy_map, scan_to_points(scan).points, result.pose,
+                              Rigid2D(truth['x'], truth['y'], truth['yaw']) if truth else None,
+                              result.hypotheses, title=f'{method}: {result.message}')
     return 0
 
 
@@ -88,7 +107,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest='command', required=True)
     loc = sub.add_parser('localize', help='localize scans (JSON lines) in a map')
     loc.add_argument('--map', default=default_map_yaml(), help='nav2 map YAML (default: the shipped office map)')
-    loc.add_argument('--scans', required=True, help="JSON-lines file of LaserScan fields, or '-' for stdin")
+    source = loc.add_mutually_exclusive_group(required=True)
+    source.add_argument('--scans', help="JSON-lines file of LaserScan fields, or '-' for stdin")
+    source.add_argument('--bag', help='rosbag2 recording (directory; sqlite3 or mcap) to read LaserScans from')
+    loc.add_argument('--topic', default='/scan', help='with --bag: the LaserScan topic (default /scan)')
+    loc.add_argument('--every', type=int, default=1, help='with --bag: localize every N-th scan (default 1)')
     loc.add_argument('--method', default=LocalizerConfig.method, help=f'one of: {", ".join(method_names())}')
     loc.add_argument('--angle-step', type=float, default=LocalizerConfig.angle_step_deg, help='Δα, degrees')
     loc.add_argument('--opening-kernel', type=int, default=LocalizerConfig.opening_kernel,
