@@ -20,7 +20,16 @@ import numpy as np
 from tqdm import tqdm
 
 from .report import write_report
-from .suites import ANGLE_STEP_METHODS, METHODS, carmen_trials, cut_trials, load_maps, sim_trials
+from .suites import (
+    ANGLE_STEP_METHODS,
+    METHODS,
+    PRIOR_METHODS,
+    carmen_trials,
+    cut_trials,
+    load_maps,
+    prior_trials,
+    sim_trials,
+)
 from .worker import run_job, worker_init
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -74,7 +83,7 @@ def precompute_cost(m, size: int = 2000) -> dict:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog='python -m global_loc.bench', description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='few poses and maps: a few minutes')
-    parser.add_argument('--suites', default='cut,sim,carmen', help='comma-separated: cut, sim, carmen')
+    parser.add_argument('--suites', default='cut,sim,carmen,prior', help='comma-separated: cut, sim, carmen, prior')
     parser.add_argument('--methods', default=','.join(METHODS))
     parser.add_argument('--jobs', type=int, default=os.cpu_count() or 1, help='worker processes')
     parser.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'), help='shared/data folder')
@@ -100,6 +109,9 @@ def main(argv=None) -> int:
     if 'sim' in suites:
         print('simulating scans with pybullet ...', file=sys.stderr)
         trials += sim_trials(maps, poses, args.seed)
+    if 'prior' in suites:
+        print('simulating scans for the search-prior suite ...', file=sys.stderr)
+        trials += prior_trials(maps, poses, args.seed)
     if 'carmen' in suites:
         print('building held-out maps from the CARMEN logs ...', file=sys.stderr)
         carmen, carmen_maps, notes['carmen_filters'] = carmen_trials(
@@ -109,7 +121,8 @@ def main(argv=None) -> int:
     if 'bnb' in methods:
         notes['bnb_precompute'] = precompute_cost(maps.get('building_31') or maps['office'])
     jobs = [(i, t, m) for i, t in enumerate(trials) for m in methods
-            if not (m not in ANGLE_STEP_METHODS and t.condition.get('angle_step', 5) != 5)]
+            if not (m not in ANGLE_STEP_METHODS and t.condition.get('angle_step', 5) != 5)
+            and (t.suite != 'prior' or m in PRIOR_METHODS)]
     rows = []
     # spawn, not fork: a child forked after OpenCV's thread pool started (the parent's map
     # building) can deadlock in its first OpenCV call (seen: cv2.setNumThreads in _worker_init).

@@ -128,6 +128,8 @@ def write_report(rows, meta, out, maps, trials) -> None:
                + ' |' for log, lr in sorted(group(car, lambda r: r['log']).items())] + \
               ['', '![success per log](carmen.png)', '']
         plot_carmen(car, methods, out)
+    if 'prior' in by_suite:
+        md += prior_section(by_suite['prior'], out)
     pre = meta.get('bnb_precompute')
     if pre:
         md += ['## bnb precomputation (once per map)', '',
@@ -136,6 +138,26 @@ def write_report(rows, meta, out, maps, trials) -> None:
     md += failure_pictures(rows, trials, maps, out)
     with open(os.path.join(out, 'REPORT.md'), 'w') as f:
         f.write('\n'.join(md) + '\n')
+
+
+def prior_section(rows, out) -> list[str]:
+    """Success and time per prior radius, and the time against the same method without one."""
+    lines = ['## Search priors', '',
+             '270° / 20 m pybullet scans; each scan localized with no prior and within a disc of the given radius '
+             'around a point up to half the radius from the truth (heading free). "area": the disc over the '
+             'map\'s free area (median over maps). "time / no prior": median time over the same method\'s '
+             'median without a prior, same scans.', '',
+             '| method | prior radius [m] | n | area | success 0.2 m/5° | marked success but wrong | median time [s] '
+             '| p95 time [s] | time / no prior |', '|---|---|---|---|---|---|---|---|---|']
+    for method, mr in sorted(group(rows, lambda r: r['method']).items()):
+        whole = stats([r for r in mr if r['prior_radius'] == 0])['median']
+        for radius, rr in sorted(group(mr, lambda r: r['prior_radius']).items(), key=lambda kv: -kv[0] or -1e9):
+            s = stats(rr)
+            area = float(np.median([r['area_share'] for r in rr]))
+            lines.append(f'| {method} | {radius:g} | {s["n"]} | {"whole map" if not radius else pct(area)} '
+                         f'| {pct(s["ok"])} | {pct(s["marked_wrong"])} | {secs(s["median"])} | {secs(s["p95"])} '
+                         f'| {s["median"] / whole:.3f} |')
+    return lines + ['']
 
 
 def bars(ax, groups: dict, methods, value, title, ylabel):

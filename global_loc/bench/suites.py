@@ -3,6 +3,7 @@ scan (or a local map's points), the true pose, and the condition it was made und
 All randomness is seeded, so the same command makes the same trials."""
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 
@@ -11,6 +12,7 @@ import numpy as np
 from ..core.map_io import OccupancyMap, load_map_yaml
 from ..core.paths import default_map_yaml
 from ..core.scan import Scan, ScanPoints
+from ..core.search_region import SearchRegion
 from ..core.transform import Rigid2D
 from ..sim.laser import LaserConfig
 from ..sim.raycast import points_cut_from_map, sample_free_poses
@@ -33,6 +35,7 @@ class Trial:
     points: ScanPoints | None = None
     base_T_laser: Rigid2D = field(default_factory=Rigid2D)
     local_map_cells: int = 0      # suite 1: size of the cut
+    region: SearchRegion | None = None   # prior suite: where the search may look
 
 
 def shared_maps(shared_dir: str) -> dict[str, str]:
@@ -105,6 +108,34 @@ def sim_trials(maps: dict[str, OccupancyMap], poses_per_map: int, seed: int) -> 
                         sim.close()
         finally:
             plain.close()
+    return trials
+
+
+PRIOR_RADII = (0.0, 10.0, 4.0, 1.5)    # m; 0: no prior (the whole map)
+PRIOR_METHODS = ('bnb', 'template_ccoeff')
+
+
+def prior_trials(maps: dict[str, OccupancyMap], poses_per_map: int, seed: int) -> list[Trial]:
+    """Search priors: pybullet 270 deg / 20 m scans at seeded free poses, each localized
+    with no prior and within discs of PRIOR_RADII around a point up to half the radius
+    from the truth (heading free), as a user's rough "it is in this room" would be."""
+    trials = []
+    laser = LaserConfig(fov_deg=270, num_beams=541, range_max=20.0)
+    for i, (name, m) in enumerate(maps.items()):
+        rng = np.random.default_rng(seed + 200 + i)
+        sim = Simulator(m, laser, seed=seed)
+        try:
+            for pose in sample_free_poses(m, poses_per_map, rng, clearance=0.5):
+                sim.place(pose)
+                truth, scan = sim.true_pose(), sim.scan()
+                for radius in PRIOR_RADII:
+                    offset, direction = radius / 2 * math.sqrt(rng.uniform()), rng.uniform(-math.pi, math.pi)
+                    center = Rigid2D(truth.x + offset * math.cos(direction), truth.y + offset * math.sin(direction))
+                    trials.append(Trial('prior', name, {'prior_radius': radius, 'area_share': round(
+                        math.pi * radius ** 2 / (m.free.sum() * m.resolution ** 2), 4) if radius else 1.0},
+                        truth, scan=scan, base_T_laser=BASE_T_LASER, region=SearchRegion(center, radius)))
+        finally:
+            sim.close()
     return trials
 
 

@@ -27,7 +27,7 @@ def run_job(job):
         if trial.points is not None:
             res = loc.localize_points(trial.points, method, step)
         else:
-            res = loc.localize(trial.scan, method, step, base_T_laser=trial.base_T_laser)
+            res = loc.localize(trial.scan, method, step, base_T_laser=trial.base_T_laser, region=trial.region)
     except Exception as e:   # a failure of a method on one trial is a data point, not a crash
         outcome = Outcome.UNUSABLE_SCAN if isinstance(e, ScanError) else Outcome.INTERNAL_ERROR
         return {**row, 'error': f'{type(e).__name__}: {e}', 'outcome': outcome.label, 'ok': False, 'ok_loose': False,
