@@ -26,6 +26,11 @@ class ScanWaiter(Generic[T]):
             self._latest = (self._clock(), scan)
             self._cond.notify_all()
 
+    def latest(self) -> Optional[T]:
+        """The newest scan, however old (None before the first)."""
+        with self._cond:
+            return None if self._latest is None else self._latest[1]
+
     def wait_after(self, since: float, timeout: float, cancelled: Callable[[], bool] = lambda: False,
                    poll_s: float = 0.05) -> Optional[T]:
         """The first scan that arrived at or after `since` (a clock reading); None when

@@ -14,7 +14,9 @@ Three ways to ask, one code path (`serve`), one localization at a time:
 Each takes the first scan that arrives after the request, localizes it, publishes the
 pose on `initialpose_topic` when confident, and shows the hypotheses and the local map
 on `~/hypotheses`, `~/hypothesis_markers`, `~/local_map` (RViz; transient local). Asked
-while not active, busy, or unable, it answers with the outcome and a reason.
+while not active, busy, or unable, it answers with the outcome and a reason. An ambiguous
+answer can be settled by motion (goal `resolve_by_motion_s`, ros/motion.py); the robot's
+health is watched, and with `auto_relocalize` restored without a request (ros/watch.py).
 """
 from __future__ import annotations
 
@@ -24,8 +26,9 @@ import threading
 import time
 import traceback
 
-from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
-from nav_msgs.msg import OccupancyGrid
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped, Twist
+from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
@@ -33,6 +36,7 @@ from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.time import Time
 from sensor_msgs.msg import LaserScan
+from std_msgs.msg import String
 from std_srvs.srv import Empty, Trigger
 from visualization_msgs.msg import MarkerArray
 
@@ -47,9 +51,11 @@ from ..core.scan_waiter import ScanWaiter
 from ..core.search_region import SearchRegion
 from ..core.transform import Rigid2D, format_pose
 from .convert import ended_result, map_from_msg, quaternion_to_yaw, result_to_msg, scan_from_msg
+from .motion import resolve_by_motion
 from .node_main import run_node
 from .parameters import declare_server_parameters
 from .rviz import hypotheses_msg, local_map_msg, markers_msg
+from .watch import LocalizationWatch
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
@@ -57,7 +63,7 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability
 class GlobalLocServer(LifecycleNode):
     def __init__(self):
         super().__init__('global_loc_server')
-        self.settings, self.config = declare_server_parameters(self)
+        self.settings, self.config, supervisor_config = declare_server_parameters(self)
         self.group = ReentrantCallbackGroup()
         self.localizer: Localizer | None = None
         self.map_error = 'no map loaded yet'
@@ -65,6 +71,10 @@ class GlobalLocServer(LifecycleNode):
         self.stopping = threading.Event()     # set: running work ends (deactivate, cleanup, shutdown)
         self.busy = threading.Lock()
         self.scans: ScanWaiter[LaserScan] = ScanWaiter()
+        self.odom: ScanWaiter[Odometry] = ScanWaiter()
+        self.watch = LocalizationWatch(self, supervisor_config)
+        self.watch_timer = None
+        self.cmd_vel_pub = self.create_publisher(Twist, self.settings.cmd_vel_topic, 10)
         self.tf_buffer = self._make_tf_buffer()
         self.pubs: dict = {}
         self.subs: list = []
@@ -90,9 +100,15 @@ class GlobalLocServer(LifecycleNode):
                                                                     reliable),
                      'hypotheses': self.create_lifecycle_publisher(PoseArray, '~/hypotheses', LATCHED),
                      'markers': self.create_lifecycle_publisher(MarkerArray, '~/hypothesis_markers', LATCHED),
-                     'local_map': self.create_lifecycle_publisher(OccupancyGrid, '~/local_map', LATCHED)}
+                     'local_map': self.create_lifecycle_publisher(OccupancyGrid, '~/local_map', LATCHED),
+                     'status': self.create_lifecycle_publisher(String, '~/status', 10),
+                     'diagnostics': self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics', 10)}
         self.subs = [self.create_subscription(LaserScan, s.scan_topic, self.scans.put, qos_profile_sensor_data,
+                                              callback_group=self.group),
+                     self.create_subscription(Odometry, s.odom_topic, self.odom.put, 20, callback_group=self.group),
+                     self.create_subscription(PoseWithCovarianceStamped, s.pose_topic, self.watch.on_pose, 10,
                                               callback_group=self.group)]
+        self.watch_timer = self.create_timer(s.health_period_s, self.watch.tick, callback_group=self.group)
         if s.use_map_topic:
             self.subs.append(self.create_subscription(OccupancyGrid, s.map_topic, self.on_map, LATCHED,
                                                       callback_group=self.group))
@@ -105,6 +121,7 @@ class GlobalLocServer(LifecycleNode):
 
     def on_activate(self, state) -> TransitionCallbackReturn:
         self.stopping.clear()
+        self.watch.reset()
         self.active = True
         s = self.settings
         self.get_logger().info(f'ready: action "localize", services ~/trigger and ~/reinitialize_global_localization, '
@@ -123,7 +140,9 @@ class GlobalLocServer(LifecycleNode):
             self.destroy_lifecycle_publisher(pub)
         for sub in self.subs:
             self.destroy_subscription(sub)
-        self.pubs, self.subs = {}, []
+        if self.watch_timer is not None:
+            self.destroy_timer(self.watch_timer)
+        self.pubs, self.subs, self.watch_timer = {}, [], None
         self.localizer, self.map_error = None, 'no map loaded (cleaned up)'
         self.get_logger().info('cleaned up: map dropped')
         return TransitionCallbackReturn.SUCCESS
@@ -202,9 +221,9 @@ class GlobalLocServer(LifecycleNode):
     def execute(self, goal_handle):
         """The action: serve the goal, then end it as its outcome says."""
         result = self.serve(goal_handle.request, lambda: goal_handle.is_cancel_requested,
-                            lambda progress, stage, best: goal_handle.publish_feedback(Localize.Feedback(
-                                progress=float(progress), stage=stage,
-                                best_score=float(best) if math.isfinite(best) else 0.0)))
+                            lambda progress, stage, best, hypotheses=0: goal_handle.publish_feedback(
+                                Localize.Feedback(progress=float(progress), stage=stage, hypotheses=int(hypotheses),
+                                                  best_score=float(best) if math.isfinite(best) else 0.0)))
         if result.outcome == Outcome.LOCALIZED:
             goal_handle.succeed()
         elif result.outcome == Outcome.CANCELED and goal_handle.is_cancel_requested:
@@ -229,7 +248,7 @@ class GlobalLocServer(LifecycleNode):
         self.serve(Localize.Goal(publish_initialpose=True))
         return response
 
-    def serve(self, goal, cancelled=lambda: False, feedback=lambda progress, stage, best: None) -> Localize.Result:
+    def serve(self, goal, cancelled=lambda: False, feedback=lambda *args: None) -> Localize.Result:
         """One localization, whoever asked; never raises: every end is an outcome."""
         if not self.active:
             return self.refuse(Outcome.NOT_ACTIVE, 'not active: the server is not in the active lifecycle state')
@@ -291,6 +310,8 @@ class GlobalLocServer(LifecycleNode):
                                         progress=progress, base_T_laser=base_T_laser, region=region)
         except ScanError as e:
             return self.refuse(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
+        if result.outcome == Outcome.AMBIGUOUS and goal.resolve_by_motion_s > 0:
+            result = resolve_by_motion(self, goal, result, base_T_laser, cancelled, feedback)
         out = result_to_msg(result, self.settings.map_frame, msg.header.stamp, time.monotonic() - start)
         out.scan_stamp = msg.header.stamp
         out.scan_age_s = (self.get_clock().now() - Time.from_msg(msg.header.stamp)).nanoseconds * 1e-9

@@ -1,8 +1,10 @@
 """`ros2 run global_loc sim`: the pybullet simulator as a ROS node.
 
 Publishes sensor_msgs/LaserScan on /scan (frame `laser`, mounted on base_link at
-x 0.16 m — give the server `laser_x:=0.16`) at `rate_hz`, and the robot's true pose as
-geometry_msgs/PoseStamped on /sim/true_pose. Drives the wheels from /cmd_vel
+x 0.16 m — give the server `laser_x:=0.16`) at `rate_hz`, wheel odometry as
+nav_msgs/Odometry on /odom (frame `odom`, child `base_link`; noise and drift set by
+`odom_noise`, `odom_drift`), and the robot's true pose as geometry_msgs/PoseStamped on
+/sim/true_pose. Drives the wheels from /cmd_vel
 (geometry_msgs/Twist); /sim/set_pose (PoseStamped) teleports the robot (the kidnapping).
 """
 from __future__ import annotations
@@ -11,6 +13,7 @@ import sys
 import time
 
 from geometry_msgs.msg import PoseStamped, Twist
+from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -20,7 +23,7 @@ from ..core.map_io import MapError, load_map_yaml
 from ..core.paths import default_map_yaml
 from ..core.transform import Rigid2D, format_pose
 from ..sim.laser import LaserConfig
-from ..sim.simulator import Simulator
+from ..sim.simulator import OdometryNoise, Simulator
 from .convert import pose_from_msg, pose_to_msg, scan_to_msg
 from .node_main import run_node
 
@@ -43,13 +46,16 @@ class SimNode(Node):
                             rate_hz=param('rate_hz', 10.0, 'scan rate, Hz'))
         clutter = param('clutter', 0, 'number of random objects (not in the map) placed in the world')
         seed = param('seed', 0, 'random seed for noise and clutter')
-        self.sim = Simulator(load_map_yaml(map_yaml), laser, seed=seed)
+        odometry = OdometryNoise(scale_std=param('odom_noise', 0.02, "odometry: random share of each wheel's travel"),
+                                 yaw_drift=param('odom_drift', 0.01, 'odometry: heading drift, rad per metre'))
+        self.sim = Simulator(load_map_yaml(map_yaml), laser, seed=seed, odometry_noise=odometry)
         self.sim.place(start)
         if clutter:
             self.sim.random_clutter(clutter, keep_clear_of=start)
         self.cmd = (0.0, 0.0)
         self.cmd_time = 0.0
         self.scan_pub = self.create_publisher(LaserScan, '/scan', 5)
+        self.odom_pub = self.create_publisher(Odometry, '/odom', 10)
         self.pose_pub = self.create_publisher(PoseStamped, '/sim/true_pose',
                                               QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                                                          durability=DurabilityPolicy.TRANSIENT_LOCAL))
@@ -77,7 +83,7 @@ class SimNode(Node):
         self.get_logger().info(f'teleported to {format_pose(pose)}')
 
     def tick(self) -> None:
-        """Advance physics by one scan period (driving if commanded), publish scan and truth."""
+        """Advance physics by one scan period (driving if commanded), publish scan, odometry and truth."""
         v, w = self.cmd if time.monotonic() - self.cmd_time < 0.5 else (0.0, 0.0)
         if v or w:
             self.sim.drive(v, w, self.period)
@@ -88,7 +94,12 @@ class SimNode(Node):
         truth.header.frame_id = 'map'
         truth.header.stamp = stamp
         truth.pose = pose_to_msg(self.sim.true_pose())
+        odom = Odometry()
+        odom.header.frame_id, odom.header.stamp, odom.child_frame_id = 'odom', stamp, 'base_link'
+        odom.pose.pose = pose_to_msg(self.sim.odom)
+        odom.twist.twist.linear.x, odom.twist.twist.angular.z = (float(c) for c in (v, w))
         self.scan_pub.publish(msg)
+        self.odom_pub.publish(odom)
         self.pose_pub.publish(truth)
 
 

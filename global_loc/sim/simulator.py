@@ -5,12 +5,14 @@
     scan = sim.scan()                          # a global_loc.core.scan.Scan
     sim.drive(v=0.0, w=0.5, duration=1.0)      # wheels, physics stepped at 240 Hz
     sim.true_pose()                            # base_link in the map frame
+    sim.odom                                   # base_link in the odom frame, from the wheels (noisy)
 
 The laser is cast with rayTestBatch from the laser link's pose, so clutter added with
 `add_clutter` (boxes, cylinders not in the map) shows in the scans.
 """
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 
@@ -34,6 +36,15 @@ PHYSICS_HZ = 240.0
 
 
 @dataclass
+class OdometryNoise:
+    """Wheel odometry's errors: each wheel's travel is off by a random share (scale_std,
+    per update), and the heading drifts by yaw_drift rad per metre driven (an unequal
+    wheel radius), so the odometry pose walks away from the truth as real ones do."""
+    scale_std: float = 0.02
+    yaw_drift: float = 0.01
+
+
+@dataclass
 class ClutterObject:
     """A box (size = (sx, sy)) or cylinder (size = (radius,)) standing on the floor."""
     x: float
@@ -44,9 +55,11 @@ class ClutterObject:
 
 
 class Simulator:
-    def __init__(self, occupancy_map: OccupancyMap, laser: LaserConfig | None = None, seed: int = 0):
+    def __init__(self, occupancy_map: OccupancyMap, laser: LaserConfig | None = None, seed: int = 0,
+                 odometry_noise: OdometryNoise | None = None):
         self.map = occupancy_map
         self.laser = laser or LaserConfig()
+        self.odometry_noise = odometry_noise or OdometryNoise()
         self.rng = np.random.default_rng(seed)
         self.client = p.connect(p.DIRECT)
         p.setGravity(0, 0, -9.81, physicsClientId=self.client)
@@ -62,6 +75,8 @@ class Simulator:
         caster = joints['caster_joint']
         p.changeDynamics(self.robot, caster, lateralFriction=0.0, rollingFriction=0.0, physicsClientId=self.client)
         self.clutter_ids = []
+        self.odom = Rigid2D()                  # base_link in the odom frame (starts at the odom origin)
+        self._odom_from = self.true_pose()
 
     def close(self) -> None:
         if self.client is not None and p.isConnected(self.client):
@@ -73,6 +88,7 @@ class Simulator:
         p.resetBasePositionAndOrientation(self.robot, [pose.x, pose.y, 0.0],
                                           p.getQuaternionFromEuler([0, 0, pose.yaw]), physicsClientId=self.client)
         p.resetBaseVelocity(self.robot, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+        self._odom_from = self.true_pose()
         for j in (self.left, self.right):
             p.setJointMotorControl2(self.robot, j, p.VELOCITY_CONTROL, targetVelocity=0.0, force=20.0,
                                     physicsClientId=self.client)
@@ -90,6 +106,26 @@ class Simulator:
                                     physicsClientId=self.client)
         for _ in range(max(1, int(round(duration * PHYSICS_HZ)))):
             p.stepSimulation(physicsClientId=self.client)
+        self.update_odometry()
+
+    def update_odometry(self) -> None:
+        """Move the odometry pose by the body's motion since the last update, as the two
+        wheels' travel with the odometry noise (each wheel's share, the heading's drift).
+        The body's motion, not the simulated wheels' turn: pybullet's wheel contacts slip
+        10-20% on a turn, far more than a real Pioneer's. A teleport (place) moves the
+        robot, not its odometry: a kidnapping."""
+        now = self.true_pose()
+        step = self._odom_from.inverse() * now
+        self._odom_from = now
+        ds = math.copysign(math.hypot(step.x, step.y), step.x)
+        left, right = ds - step.yaw * WHEEL_SEPARATION / 2.0, ds + step.yaw * WHEEL_SEPARATION / 2.0
+        noise = self.odometry_noise
+        if noise.scale_std > 0:
+            left, right = np.array([left, right]) * (1.0 + self.rng.normal(0.0, noise.scale_std, 2))
+        ds = (left + right) / 2.0
+        dyaw = (right - left) / WHEEL_SEPARATION + noise.yaw_drift * abs(ds)
+        self.odom = self.odom * Rigid2D(float(ds * math.cos(dyaw / 2.0)), float(ds * math.sin(dyaw / 2.0)),
+                                        float(dyaw))
 
     def add_clutter(self, objects: list[ClutterObject]) -> None:
         for o in objects:

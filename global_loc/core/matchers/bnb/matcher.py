@@ -27,6 +27,7 @@ from ...map_io import OccupancyMap
 from ...pixel_kernels import warm_up as warm_up_pixel_kernels
 from ...scan import ScanPoints
 from ...search_region import SearchRegion
+from ...transform import Rigid2D
 from ..base import Candidate, Match, Matcher, MatchOptions, ProgressFn, distinct
 from .free_space import see_through_fractions
 from .grids import PrecomputationGridStack
@@ -130,6 +131,19 @@ class BranchAndBoundMatcher(Matcher):
         if progress:
             progress(1.0, candidates[0].score if candidates else 0.0)
         return Match(candidates, stats)
+
+    def fit_at(self, points: ScanPoints, laser_pose: Rigid2D) -> tuple[float, float, Rigid2D]:
+        """How well the map explains the scan at a laser pose, refined within about a cell
+        (a tracked pose is never exact): (field score, share of beams through mapped walls,
+        the refined pose). The same two measures the search's hypotheses are ranked by."""
+        pts = self.prepare(points.points)
+        if len(pts) < 3:
+            return 0.0, 0.0, laser_pose
+        frame = self.map.frame
+        u, v, yaw, score = refine(self.stack.field, *frame.world_pose_to_pixel(laser_pose), pts, self.map.resolution)
+        through = see_through_fractions(self.stack.occupied, np.array([[u, v, yaw]]), points, self.map.resolution,
+                                        self.options)[0]
+        return float(score), float(through), frame.pixel_pose_to_world(u, v, yaw)
 
     def search_space(self, n_angles: int, region: Optional[SearchRegion]) -> SearchSpace:
         """The search's bounds: the map, the leaf angles, and the prior (in pixels and angle steps)."""

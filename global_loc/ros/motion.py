@@ -1,0 +1,75 @@
+"""Settling an ambiguous answer by motion inside a localization request: the hypotheses
+are followed with odometry and scored on every new scan (core.motion.MotionResolver)
+while the robot moves - driven by someone else, or turned in place by the server itself
+(one slow turn on cmd_vel, stopped with a zero twist however the request ends)."""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+from geometry_msgs.msg import Twist, Vector3
+
+from ..core.localizer import Hypothesis, LocalizationResult
+from ..core.motion import MotionConfig, MotionResolver
+from ..core.outcome import Outcome
+from ..core.scan import ScanError, scan_to_points
+from ..core.transform import Rigid2D
+from .convert import pose_from_msg, scan_from_msg
+
+
+def resolve_by_motion(node, goal, result: LocalizationResult, base_T_laser: Rigid2D, cancelled,
+                      feedback) -> LocalizationResult:
+    """Follow `result`'s hypotheses for up to goal.resolve_by_motion_s; the winner as a
+    localized result, or the result still ambiguous with the hypotheses left."""
+    odom = node.odom.latest()
+    if odom is None:
+        return dataclasses.replace(result, message=f'{result.message} (no odometry on {node.settings.odom_topic}: '
+                                                   f'cannot resolve by motion)')
+    matcher = node.localizer.matcher('bnb')
+    laser_T_base = base_T_laser.inverse()
+    c = matcher.options
+    resolver = MotionResolver([h.pose for h in result.hypotheses], MotionConfig(lead=c.min_confidence *
+                                                                                (1.0 - c.keep_ratio)))
+    start = time.monotonic()
+    deadline = start + goal.resolve_by_motion_s
+    turn_s = 2 * math.pi / node.settings.rotate_speed
+    last_odom, since = pose_from_msg(odom.pose.pose), start
+    node.get_logger().info(f'resolving by motion: {len(resolver.tracks)} hypotheses, up to '
+                           f'{goal.resolve_by_motion_s:.0f} s' + (', turning in place' if goal.rotate_in_place else ''))
+    winner = None
+    try:
+        while time.monotonic() < deadline and winner is None:
+            turning = goal.rotate_in_place and time.monotonic() - start < turn_s
+            node.cmd_vel_pub.publish(Twist(angular=Vector3(z=float(node.settings.rotate_speed) if turning else 0.0)))
+            msg = node.scans.wait_after(since, max(0.0, deadline - since), cancelled)
+            if msg is None:
+                break
+            since = time.monotonic()
+            now_odom = pose_from_msg(node.odom.latest().pose.pose)
+            motion, last_odom = last_odom.inverse() * now_odom, now_odom
+            try:
+                points = scan_to_points(scan_from_msg(msg))
+            except ScanError:
+                continue
+
+            def fit(base_pose, points=points):
+                score, through, laser = matcher.fit_at(points, base_pose * base_T_laser)
+                return score * (1.0 - through), laser * laser_T_base
+
+            winner = resolver.update(motion, fit)
+            feedback(0.95, 'resolving_by_motion', resolver.tracks[0].evidence if resolver.tracks else 0.0,
+                     len(resolver.tracks))
+    finally:
+        node.cmd_vel_pub.publish(Twist())       # stop, however this ends
+    hypotheses = [Hypothesis(t.pose, t.evidence) for t in resolver.tracks]
+    moved = f'{resolver.travelled:.2f} m and {math.degrees(resolver.turned):.0f} deg'
+    if winner is None:
+        return dataclasses.replace(result, hypotheses=hypotheses, pose=hypotheses[0].pose if hypotheses else None,
+                                   message=f'ambiguous after {time.monotonic() - start:.0f} s of motion ({moved}): '
+                                           f'{len(hypotheses)} place(s) still match; see the hypotheses')
+    second = hypotheses[1].score if len(hypotheses) > 1 else 0.0
+    confidence = min(1.0, (winner.evidence - second) / winner.evidence / (1.0 - c.keep_ratio))
+    return dataclasses.replace(result, outcome=Outcome.LOCALIZED, pose=winner.pose, score=winner.evidence,
+                               confidence=confidence, hypotheses=hypotheses,
+                               message=f'localized by motion: one place led after {moved}')
