@@ -1,8 +1,12 @@
 """Settling an ambiguous place by motion, without ROS. The hypotheses of an ambiguous
 answer are followed with odometry; each new scan is scored at each of them (refined
-locally: cheap) and the evidence accumulates. Once the robot has moved far enough, the
-first hypothesis whose mean fit leads the next by the margin a confident answer needs
-wins; a view that never tells them apart (a perfectly symmetric room) never lets one win.
+locally: cheap) and the fits add up. Once the robot has moved far enough, the first
+hypothesis whose summed fit leads the next by `lead_scans` scans' worth of the margin a
+confident single-scan answer needs wins. Sums, not means: the views that tell twins
+apart may be a few of many (a box seen only while facing one way), and a mean dilutes
+them; twins' sums differ only by noise, which grows with the square root of the number
+of scans, far slower than a real lead. A view that never tells them apart (a perfectly
+symmetric room) never lets one win.
 """
 from __future__ import annotations
 
@@ -20,7 +24,8 @@ FitFn = Callable[[Rigid2D], tuple[float, Rigid2D]]
 
 @dataclass(frozen=True)
 class MotionConfig:
-    lead: float = 0.05                   # relative lead of the mean fit a winner needs (bnb's confident margin)
+    lead: float = 0.05                   # a confident single-scan margin (bnb's) ...
+    lead_scans: float = 10.0             # ... this many scans' worth of it is the summed lead a winner needs
     min_travel_m: float = 0.5            # ... after the robot drove this far
     min_turn: float = math.radians(90)   # ... or turned this much
     keep: float = 0.8                    # hypotheses whose mean fit falls below keep x the best are dropped
@@ -33,7 +38,12 @@ class Track:
 
     @property
     def evidence(self) -> float:
+        """The mean fit (for ranking and reporting)."""
         return float(np.mean(self.fits)) if self.fits else 0.0
+
+    @property
+    def total(self) -> float:
+        return float(np.sum(self.fits))
 
 
 class MotionResolver:
@@ -52,7 +62,7 @@ class MotionResolver:
         for track in self.tracks:
             score, track.pose = fit(track.pose * motion)
             track.fits.append(score)
-        self.tracks.sort(key=lambda t: -t.evidence)
+        self.tracks.sort(key=lambda t: -t.total)
         best = self.tracks[0].evidence
         self.tracks = [t for t in self.tracks if t.evidence >= self.config.keep * best]
         return self.winner()
@@ -61,6 +71,6 @@ class MotionResolver:
         c = self.config
         if not self.tracks or (self.travelled < c.min_travel_m and self.turned < c.min_turn):
             return None
-        best = self.tracks[0].evidence
-        second = self.tracks[1].evidence if len(self.tracks) > 1 else 0.0
-        return self.tracks[0] if best > 0 and best - second >= c.lead * best else None
+        best = self.tracks[0]
+        second = self.tracks[1].total if len(self.tracks) > 1 else 0.0
+        return best if best.total > 0 and best.total - second >= c.lead * c.lead_scans * best.evidence else None

@@ -44,6 +44,10 @@ def parse_args(argv):
     parser.add_argument('--radius', type=float, default=0.0, help='search only within this many metres of --near')
     parser.add_argument('--yaw-tolerance', type=float, default=0.0,
                         help="search only headings within this many degrees of --near's")
+    parser.add_argument('--resolve-by-motion', type=float, default=0.0, metavar='S',
+                        help='when ambiguous, follow the hypotheses for up to S seconds while the robot moves')
+    parser.add_argument('--rotate-in-place', action='store_true',
+                        help='with --resolve-by-motion: the server turns the robot once, slowly (cmd_vel)')
     parser.add_argument('--json', action='store_true',
                         help='print only the result, as one JSON object (outcome, pose, covariance, ...)')
     return parser.parse_args(argv)
@@ -58,15 +62,17 @@ def run(node, args) -> int:
     goal = Localize.Goal(method=args.method, angle_step_deg=args.angle_step, timeout_s=args.timeout,
                          publish_initialpose=not args.no_publish, publish_if_ambiguous=args.publish_if_ambiguous,
                          search_center=Pose2D(x=args.near[0], y=args.near[1], theta=math.radians(args.near[2])),
-                         search_radius_m=args.radius, search_yaw_tolerance_deg=args.yaw_tolerance)
+                         search_radius_m=args.radius, search_yaw_tolerance_deg=args.yaw_tolerance,
+                         resolve_by_motion_s=args.resolve_by_motion, rotate_in_place=args.rotate_in_place)
     last_stage = ['']
 
     def on_feedback(fb):
         f = fb.feedback
         if args.json:
             return
-        if f.stage != last_stage[0] or f.progress >= 0.95:
-            print(f'[{f.progress * 100:5.1f}%] {f.stage}  best score {f.best_score:.3f}', flush=True)
+        if f.stage != last_stage[0] or (f.progress >= 0.95 and f.stage != 'resolving_by_motion'):
+            extra = f', {f.hypotheses} hypotheses' if f.stage == 'resolving_by_motion' else ''
+            print(f'[{f.progress * 100:5.1f}%] {f.stage}  best score {f.best_score:.3f}{extra}', flush=True)
             last_stage[0] = f.stage
 
     send = client.send_goal_async(goal, feedback_callback=on_feedback)

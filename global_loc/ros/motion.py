@@ -22,7 +22,7 @@ def resolve_by_motion(node, goal, result: LocalizationResult, base_T_laser: Rigi
                       feedback) -> LocalizationResult:
     """Follow `result`'s hypotheses for up to goal.resolve_by_motion_s; the winner as a
     localized result, or the result still ambiguous with the hypotheses left."""
-    odom = node.odom.latest()
+    odom = node.odom.wait_after(0.0, 2.0, cancelled)      # any odometry; a moment for a late first one
     if odom is None:
         return dataclasses.replace(result, message=f'{result.message} (no odometry on {node.settings.odom_topic}: '
                                                    f'cannot resolve by motion)')

@@ -1,0 +1,183 @@
+"""Keeping a robot localized without a person, end to end in real processes: the pybullet
+simulator (scans, wheel odometry), the server, and a node in this process playing the
+localizer's part (AMCL): it publishes /amcl_pose, and takes up a pose sent on /initialpose."""
+import json
+import math
+import time
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist, Vector3
+from std_msgs.msg import String
+
+from conftest import assert_pose_near, grid_map, symmetric_room, walled
+from global_loc.core.map_io import save_map_yaml
+from global_loc.core.transform import Rigid2D
+from global_loc.ros.convert import pose_from_msg, pose_to_msg, pose_with_covariance
+from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, run_client, start_server, start_sim
+from global_loc.sim.simulator import BASE_T_LASER
+
+LASER_X = f'laser_x:={BASE_T_LASER.x}'
+
+
+class FakeLocalizer(TopicRecorder):
+    """Publishes /amcl_pose at 5 Hz: the simulator's true pose (`follow_truth`), or a fixed
+    pose until a pose comes on /initialpose, then that one (as AMCL re-initializes)."""
+
+    def __init__(self, env, fixed: Rigid2D = None, follow_truth: bool = False):
+        super().__init__(env, {'/initialpose': (PoseWithCovarianceStamped, reliable()),
+                               '/sim/true_pose': (PoseStamped, reliable(latched=True)),
+                               '/global_loc_server/status': (String, reliable()),
+                               '/cmd_vel': (Twist, reliable())}, 'fake_amcl')
+        self.fixed, self.follow_truth = fixed, follow_truth
+        self.pub = self.node.create_publisher(PoseWithCovarianceStamped, '/amcl_pose', reliable())
+        self.cmd = self.node.create_publisher(Twist, '/cmd_vel', reliable())
+        self.set_pose = self.node.create_publisher(PoseStamped, '/sim/set_pose', reliable())
+        self.node.create_timer(0.2, self.tick)
+
+    def truth(self) -> Rigid2D:
+        return pose_from_msg(self.messages['/sim/true_pose'][-1].pose)
+
+    def tick(self):
+        if self.follow_truth and self.messages['/sim/true_pose']:
+            pose = self.truth()
+        elif self.messages['/initialpose']:
+            pose = pose_from_msg(self.messages['/initialpose'][-1].pose.pose)
+        elif self.fixed is not None:
+            pose = self.fixed
+        else:
+            return
+        self.pub.publish(pose_with_covariance(pose, np.diag([0.01, 0.01, 0.005]), 'map',
+                                              self.node.get_clock().now().to_msg()))
+
+    def states(self) -> list[str]:
+        return [m.data.split()[0] for m in self.messages['/global_loc_server/status']]
+
+    def wait_for_state(self, state: str, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.states() and self.states()[-1] == state:
+                return True
+            time.sleep(0.1)
+        return False
+
+    def teleport(self, pose: Rigid2D) -> None:
+        msg = PoseStamped()
+        msg.header.frame_id, msg.pose = 'map', pose_to_msg(pose)
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            self.set_pose.publish(msg)
+            time.sleep(0.3)
+            if self.truth().distance_to(pose)[0] < 0.05:
+                return
+        raise AssertionError('the simulator did not teleport the robot')
+
+
+@pytest.fixture
+def processes():
+    started = []
+    yield started
+    for p in reversed(started):
+        assert p.stop() == 0, p.output()[-3000:]
+
+
+def test_normal_driving_with_a_correct_pose_raises_no_alarm_and_publishes_nothing(tmp_path, processes):
+    env = isolated_env()
+    amcl = FakeLocalizer(env, follow_truth=True)
+    try:
+        processes.append(start_sim(env, tmp_path / 'sim.log', 'x:=12.0', 'y:=8.0', 'yaw:=0.0'))
+        processes.append(start_server(env, tmp_path / 'server.log', LASER_X, 'auto_relocalize:=true',
+                                      'relocalize.start_delay_s:=5.0'))
+        assert amcl.wait_for_state('localized', 20), amcl.states()
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 60:       # a minute of driving: slow circles, the odometry drifting
+            turn = 0.3 * math.copysign(1, math.sin((time.monotonic() - t0) / 6))
+            amcl.cmd.publish(Twist(linear=Vector3(x=0.25), angular=Vector3(z=turn)))
+            time.sleep(0.1)
+        states = amcl.states()
+        assert 'lost' not in states and 'relocalizing' not in states, states
+        assert states.count('localized') > 60, states
+        assert amcl.messages['/initialpose'] == []
+    finally:
+        amcl.close()
+
+
+def test_a_kidnapped_robot_is_found_lost_and_relocalized_without_a_goal(tmp_path, processes):
+    env = isolated_env()
+    start = Rigid2D(3.0, 4.0, 0.7)
+    amcl = FakeLocalizer(env, fixed=start)
+    try:
+        processes.append(start_sim(env, tmp_path / 'sim.log', f'x:={start.x}', f'y:={start.y}', f'yaw:={start.yaw}'))
+        processes.append(start_server(env, tmp_path / 'server.log', LASER_X, 'auto_relocalize:=true',
+                                      'relocalize.start_delay_s:=5.0'))
+        assert amcl.wait_for_state('localized', 20), amcl.states()
+        assert amcl.messages['/initialpose'] == []
+        kidnap = Rigid2D(20.0, 12.5, 2.5)
+        amcl.teleport(kidnap)           # the localizer still believes the old place
+        assert amcl.wait_for('/initialpose', 1, timeout=40), amcl.states()
+        assert 'lost' in amcl.states()
+        assert_pose_near(pose_from_msg(amcl.messages['/initialpose'][0].pose.pose), amcl.truth())
+        assert amcl.wait_for_state('localized', 15), amcl.states()     # the localizer took it: the fit recovered
+    finally:
+        amcl.close()
+
+
+def aisles_with_a_box():
+    """A 10 x 5 m store: shelves at x = 1, 3, ..., 9 m, so the aisles at x = 4 and 6 look
+    alike from their ends within 2.5 m - and a box in the x = 4 aisle, 1.2 m below its top
+    end, that a robot at that end sees only when it turns round."""
+    grid = walled(100, 200)
+    for x in (1, 3, 5, 7, 9):
+        grid[20:80, round(x / 0.05) - 3:round(x / 0.05) + 3] = 100
+    grid[60:68, 76:84] = 100
+    return grid_map(grid)
+
+
+LASER_180 = ['fov_deg:=180.0', 'num_beams:=361', 'range_max:=2.5']
+
+
+def test_an_ambiguous_aisle_end_is_settled_by_turning_in_place(tmp_path, processes):
+    save_map_yaml(aisles_with_a_box(), tmp_path / 'store.yaml')
+    env = isolated_env()
+    amcl = FakeLocalizer(env)
+    try:
+        processes.append(start_sim(env, tmp_path / 'sim.log', f'map_yaml:={tmp_path / "store.yaml"}', 'x:=4.0',
+                                   'y:=4.3', f'yaw:={math.pi / 2}', *LASER_180))
+        processes.append(start_server(env, tmp_path / 'server.log', f'map_yaml:={tmp_path / "store.yaml"}',
+                                      LASER_X))
+        assert amcl.wait_for_publisher('/initialpose')
+        alone = json.loads(run_client(env, '--json', '--timeout', '10', '--no-publish').stdout)
+        assert alone['outcome'] == 'ambiguous' and len(alone['hypotheses']) >= 2, alone
+        out = run_client(env, '--json', '--timeout', '10', '--resolve-by-motion', '40', '--rotate-in-place')
+        result = json.loads(out.stdout)
+        assert result['outcome'] == 'localized' and 'by motion' in result['message'], result
+        published = amcl.wait_for('/initialpose', 1)
+        assert len(published) == 1
+        assert_pose_near(pose_from_msg(published[0].pose.pose), amcl.truth())
+        time.sleep(0.5)
+        last = amcl.messages['/cmd_vel'][-1]
+        assert last.angular.z == 0.0 and last.linear.x == 0.0           # stopped
+    finally:
+        amcl.close()
+
+
+def test_a_symmetric_room_stays_ambiguous_after_turning_and_publishes_nothing(tmp_path, processes):
+    save_map_yaml(symmetric_room(), tmp_path / 'square.yaml')
+    env = isolated_env()
+    amcl = FakeLocalizer(env)
+    try:
+        processes.append(start_sim(env, tmp_path / 'sim.log', f'map_yaml:={tmp_path / "square.yaml"}', 'x:=2.0',
+                                   'y:=1.4', 'yaw:=0.4', 'fov_deg:=360.0', 'num_beams:=720'))
+        processes.append(start_server(env, tmp_path / 'server.log', f'map_yaml:={tmp_path / "square.yaml"}',
+                                      LASER_X))
+        assert amcl.wait_for_publisher('/initialpose')
+        out = run_client(env, '--json', '--timeout', '10', '--resolve-by-motion', '12', '--rotate-in-place')
+        result = json.loads(out.stdout)
+        assert result['outcome'] == 'ambiguous' and result['message'].startswith('ambiguous after'), result
+        assert len(result['hypotheses']) >= 2
+        time.sleep(1.0)
+        assert amcl.messages['/initialpose'] == []
+        assert any(m.angular.z > 0 for m in amcl.messages['/cmd_vel'])      # it did turn ...
+        assert amcl.messages['/cmd_vel'][-1].angular.z == 0.0                # ... and stopped
+    finally:
+        amcl.close()
