@@ -18,10 +18,14 @@ from ..core.scan import Scan
 from ..core.transform import Rigid2D
 
 
+def stamp_seconds(stamp) -> float:
+    """A builtin_interfaces/Time as seconds."""
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
 def scan_from_msg(msg: LaserScan) -> Scan:
     return Scan(msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max,
-                np.asarray(msg.ranges, dtype=float),
-                msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
+                np.asarray(msg.ranges, dtype=float), stamp_seconds(msg.header.stamp))
 
 
 def scan_to_msg(scan: Scan, frame_id: str, stamp, scan_time: float = 0.0) -> LaserScan:

@@ -15,10 +15,10 @@ from ..core.motion import MotionConfig, MotionResolver
 from ..core.outcome import Outcome
 from ..core.scan import ScanError, scan_to_points
 from ..core.transform import Rigid2D
-from .convert import pose_from_msg, scan_from_msg
+from .convert import scan_from_msg, stamp_seconds
 
 
-def resolve_by_motion(node, goal, result: LocalizationResult, base_T_laser: Rigid2D, cancelled,
+def resolve_by_motion(node, goal, result: LocalizationResult, first_scan, base_T_laser: Rigid2D, cancelled,
                       feedback) -> LocalizationResult:
     """Follow `result`'s hypotheses for up to goal.resolve_by_motion_s; the winner as a
     localized result, or the result still ambiguous with the hypotheses left."""
@@ -34,7 +34,7 @@ def resolve_by_motion(node, goal, result: LocalizationResult, base_T_laser: Rigi
     start = time.monotonic()
     deadline = start + goal.resolve_by_motion_s
     turn_s = 2 * math.pi / node.settings.rotate_speed
-    last_odom, since = pose_from_msg(odom.pose.pose), start
+    last_stamp, since = stamp_seconds(first_scan.header.stamp), start
     node.get_logger().info(f'resolving by motion: {len(resolver.tracks)} hypotheses, up to '
                            f'{goal.resolve_by_motion_s:.0f} s' + (', turning in place' if goal.rotate_in_place else ''))
     winner = None
@@ -46,8 +46,8 @@ def resolve_by_motion(node, goal, result: LocalizationResult, base_T_laser: Rigi
             if msg is None:
                 break
             since = time.monotonic()
-            now_odom = pose_from_msg(node.odom.latest().pose.pose)
-            motion, last_odom = last_odom.inverse() * now_odom, now_odom
+            stamp = stamp_seconds(msg.header.stamp)
+            motion, last_stamp = node.odom_history.motion(last_stamp, stamp) or Rigid2D(), stamp
             try:
                 points = scan_to_points(scan_from_msg(msg))
             except ScanError:

@@ -46,11 +46,20 @@ from ..core.localizer import Localizer, check_angle_step
 from ..core.map_io import MapError, load_map_yaml
 from ..core.matchers import MethodError, resolve_method
 from ..core.outcome import Cancelled, Outcome
+from ..core.pose_history import PoseHistory
 from ..core.scan import ScanError, scan_to_points
 from ..core.scan_waiter import ScanWaiter
 from ..core.search_region import SearchRegion
 from ..core.transform import Rigid2D, format_pose
-from .convert import ended_result, map_from_msg, quaternion_to_yaw, result_to_msg, scan_from_msg
+from .convert import (
+    ended_result,
+    map_from_msg,
+    pose_from_msg,
+    quaternion_to_yaw,
+    result_to_msg,
+    scan_from_msg,
+    stamp_seconds,
+)
 from .motion import resolve_by_motion
 from .node_main import run_node
 from .parameters import declare_server_parameters
@@ -71,7 +80,8 @@ class GlobalLocServer(LifecycleNode):
         self.stopping = threading.Event()     # set: running work ends (deactivate, cleanup, shutdown)
         self.busy = threading.Lock()
         self.scans: ScanWaiter[LaserScan] = ScanWaiter()
-        self.odom: ScanWaiter[Odometry] = ScanWaiter()
+        self.odom: ScanWaiter[Odometry] = ScanWaiter()        # the newest odometry (has any come?)
+        self.odom_history = PoseHistory()                      # odometry by stamp
         self.watch = LocalizationWatch(self, supervisor_config)
         self.watch_timer = None
         self.cmd_vel_pub = self.create_publisher(Twist, self.settings.cmd_vel_topic, 10)
@@ -105,7 +115,7 @@ class GlobalLocServer(LifecycleNode):
                      'diagnostics': self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics', 10)}
         self.subs = [self.create_subscription(LaserScan, s.scan_topic, self.scans.put, qos_profile_sensor_data,
                                               callback_group=self.group),
-                     self.create_subscription(Odometry, s.odom_topic, self.odom.put, 20, callback_group=self.group),
+                     self.create_subscription(Odometry, s.odom_topic, self.on_odom, 20, callback_group=self.group),
                      self.create_subscription(PoseWithCovarianceStamped, s.pose_topic, self.watch.on_pose, 10,
                                               callback_group=self.group)]
         self.watch_timer = self.create_timer(s.health_period_s, self.watch.tick, callback_group=self.group)
@@ -178,6 +188,10 @@ class GlobalLocServer(LifecycleNode):
         except MethodError as e:
             self.get_logger().error(f'default method: {e}')
         self.localizer = localizer
+
+    def on_odom(self, msg: Odometry) -> None:
+        self.odom_history.add(stamp_seconds(msg.header.stamp), pose_from_msg(msg.pose.pose))
+        self.odom.put(msg)
 
     def on_map(self, msg: OccupancyGrid) -> None:
         """A new map from the map topic replaces the current one (a running localization keeps its own)."""
@@ -311,7 +325,7 @@ class GlobalLocServer(LifecycleNode):
         except ScanError as e:
             return self.refuse(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
         if result.outcome == Outcome.AMBIGUOUS and goal.resolve_by_motion_s > 0:
-            result = resolve_by_motion(self, goal, result, base_T_laser, cancelled, feedback)
+            result = resolve_by_motion(self, goal, result, msg, base_T_laser, cancelled, feedback)
         out = result_to_msg(result, self.settings.map_frame, msg.header.stamp, time.monotonic() - start)
         out.scan_stamp = msg.header.stamp
         out.scan_age_s = (self.get_clock().now() - Time.from_msg(msg.header.stamp)).nanoseconds * 1e-9

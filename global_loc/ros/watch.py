@@ -18,7 +18,7 @@ from global_loc_interfaces.action import Localize
 from ..core.outcome import Outcome
 from ..core.scan import ScanError, scan_to_points
 from ..core.supervisor import Health, Supervisor, SupervisorConfig
-from .convert import pose_from_msg, scan_from_msg
+from .convert import pose_from_msg, scan_from_msg, stamp_seconds
 
 LEVELS = {Health.LOCALIZED: DiagnosticStatus.OK, Health.LOST: DiagnosticStatus.ERROR}
 
@@ -28,7 +28,7 @@ class LocalizationWatch:
         self.node = node
         self.config = config
         self.supervisor = Supervisor(config, time.monotonic())
-        self.belief = None        # (pose from the localizer, odometry pose then or None)
+        self.belief = None        # (pose from the localizer, its stamp)
         self.lock = threading.Lock()
 
     def reset(self) -> None:
@@ -39,21 +39,18 @@ class LocalizationWatch:
 
     def on_pose(self, msg) -> None:
         """The localizer's pose: follow it from here."""
-        odom = self.node.odom.latest()
         with self.lock:
-            self.belief = (pose_from_msg(msg.pose.pose), None if odom is None else pose_from_msg(odom.pose.pose))
+            self.belief = (pose_from_msg(msg.pose.pose), stamp_seconds(msg.header.stamp))
             self.supervisor.on_pose(time.monotonic())
 
-    def believed_pose(self):
-        """The localizer's last pose moved by the odometry since, or None."""
+    def believed_pose(self, stamp: float):
+        """The localizer's last pose moved by the odometry to `stamp`, or None."""
         with self.lock:
             if self.belief is None:
                 return None
-            pose, odom_then = self.belief
-        odom = self.node.odom.latest()
-        if odom_then is None or odom is None:
-            return pose
-        return pose * (odom_then.inverse() * pose_from_msg(odom.pose.pose))
+            pose, since = self.belief
+        motion = self.node.odom_history.motion(since, stamp)
+        return pose if motion is None else pose * motion
 
     def tick(self) -> None:
         """Check the fit, publish the state, start a relocalization when one is due."""
@@ -61,8 +58,9 @@ class LocalizationWatch:
         if not node.active or node.localizer is None:
             return
         now = time.monotonic()
-        pose, msg = self.believed_pose(), node.scans.latest()
-        if pose is not None and msg is not None:
+        msg = node.scans.latest()
+        pose = None if msg is None else self.believed_pose(stamp_seconds(msg.header.stamp))
+        if pose is not None:
             try:
                 points = scan_to_points(scan_from_msg(msg))
                 score, through, _ = node.localizer.matcher('bnb').fit_at(
