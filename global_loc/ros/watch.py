@@ -69,13 +69,14 @@ class LocalizationWatch:
                     self.supervisor.on_fit(now, score * (1.0 - through))
             except ScanError:
                 pass
+        self.publish()
         with self.lock:
             reason = self.supervisor.should_relocalize(now)
             if reason:
                 self.supervisor.started_relocalization(now)
-        self.publish()
         if reason:
             node.get_logger().warn(f'relocalizing on its own: {reason}')
+            self.publish()
             threading.Thread(target=self.relocalize, daemon=True, name='relocalize').start()
 
     def relocalize(self) -> None:
