@@ -10,7 +10,7 @@ import pytest
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist, Vector3
 from std_msgs.msg import String
 
-from conftest import assert_pose_near, grid_map, symmetric_room, walled
+from conftest import aisles_with_a_box, assert_pose_near, symmetric_room
 from global_loc.core.map_io import save_map_yaml
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import pose_from_msg, pose_to_msg, pose_with_covariance
@@ -122,17 +122,6 @@ def test_a_kidnapped_robot_is_found_lost_and_relocalized_without_a_goal(tmp_path
         assert amcl.wait_for_state('localized', 15), amcl.states()     # the localizer took it: the fit recovered
     finally:
         amcl.close()
-
-
-def aisles_with_a_box():
-    """A 10 x 5 m store: shelves at x = 1, 3, ..., 9 m, so the aisles at x = 4 and 6 look
-    alike from their ends within 2.5 m - and a box in the x = 4 aisle, 1.2 m below its top
-    end, that a robot at that end sees only when it turns round."""
-    grid = walled(100, 200)
-    for x in (1, 3, 5, 7, 9):
-        grid[20:80, round(x / 0.05) - 3:round(x / 0.05) + 3] = 100
-    grid[60:68, 76:84] = 100
-    return grid_map(grid)
 
 
 LASER_180 = ['fov_deg:=180.0', 'num_beams:=361', 'range_max:=2.5']

@@ -19,6 +19,7 @@ import time
 import numpy as np
 from tqdm import tqdm
 
+from .relocalization import relocalization_rows
 from .report import write_report
 from .suites import (
     ANGLE_STEP_METHODS,
@@ -29,6 +30,7 @@ from .suites import (
     load_maps,
     prior_trials,
     sim_trials,
+    symmetric_maps,
 )
 from .worker import run_job, worker_init
 
@@ -83,7 +85,8 @@ def precompute_cost(m, size: int = 2000) -> dict:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog='python -m global_loc.bench', description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='few poses and maps: a few minutes')
-    parser.add_argument('--suites', default='cut,sim,carmen,prior', help='comma-separated: cut, sim, carmen, prior')
+    parser.add_argument('--suites', default='cut,sim,carmen,prior,relocalization',
+                        help='comma-separated: cut, sim, carmen, prior, relocalization')
     parser.add_argument('--methods', default=','.join(METHODS))
     parser.add_argument('--jobs', type=int, default=os.cpu_count() or 1, help='worker processes')
     parser.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'), help='shared/data folder')
@@ -112,10 +115,12 @@ def main(argv=None) -> int:
     if 'prior' in suites:
         print('simulating scans for the search-prior suite ...', file=sys.stderr)
         trials += prior_trials(maps, poses, args.seed)
-    if 'carmen' in suites:
+    carmen, carmen_maps = [], {}
+    if 'carmen' in suites or 'relocalization' in suites:
         print('building held-out maps from the CARMEN logs ...', file=sys.stderr)
         carmen, carmen_maps, notes['carmen_filters'] = carmen_trials(
             args.shared, args.scans_per_log or (12 if args.quick else 100), args.seed)
+    if 'carmen' in suites:
         trials += carmen
         maps.update(carmen_maps)
     if 'bnb' in methods:
@@ -132,8 +137,13 @@ def main(argv=None) -> int:
         for row in tqdm(pool.imap_unordered(run_job, jobs, chunksize=2), total=len(jobs), desc='localizations',
                         file=sys.stderr):
             rows.append(row)
+    if 'relocalization' in suites:
+        print('relocalization suite (kidnap and turn, watch) ...', file=sys.stderr)
+        world = {**{n: m for n, m in maps.items() if '/' not in n}, **symmetric_maps()}
+        notes['relocalization'] = relocalization_rows(world, max(2, poses // 5), 1.0 if args.quick else 10.0,
+                                                      args.seed, carmen, carmen_maps)
     with open(os.path.join(out, 'rows.jsonl'), 'w') as f:
-        for row in rows:
+        for row in rows + notes.get('relocalization', []):
             f.write(json.dumps(row) + '\n')
     meta = {'machine': machine, 'command': 'python -m global_loc.bench ' + ' '.join(argv or sys.argv[1:]),
             'jobs': args.jobs, 'threads': threads, 'wall_time_s': round(time.time() - t0, 1), 'quick': args.quick,

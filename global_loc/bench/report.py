@@ -130,6 +130,8 @@ def write_report(rows, meta, out, maps, trials) -> None:
         plot_carmen(car, methods, out)
     if 'prior' in by_suite:
         md += prior_section(by_suite['prior'], out)
+    if meta.get('relocalization'):
+        md += relocalization_section(meta['relocalization'])
     pre = meta.get('bnb_precompute')
     if pre:
         md += ['## bnb precomputation (once per map)', '',
@@ -157,6 +159,51 @@ def prior_section(rows, out) -> list[str]:
             lines.append(f'| {method} | {radius:g} | {s["n"]} | {"whole map" if not radius else pct(area)} '
                          f'| {pct(s["ok"])} | {pct(s["marked_wrong"])} | {secs(s["median"])} | {secs(s["p95"])} '
                          f'| {s["median"] / whole:.3f} |')
+    return lines + ['']
+
+
+def relocalization_section(rows) -> list[str]:
+    """Kidnap and turn, watch, and the fits behind the supervisor's thresholds."""
+    tests = group(rows, lambda r: r['test'])
+    lines = ['## Keeping a robot localized (relocalization suite)', '',
+             'Kidnap and turn: one scan at a seeded free pose; when the answer is ambiguous the robot turns in '
+             'place (0.4 rad/s, one turn at most) and the hypotheses are followed with the simulated wheel '
+             'odometry until one leads. "success": marked success and right (0.2 m / 5°); "wrong": marked '
+             'success but wrong.', '',
+             '| map | n | single scan: success | wrong | ambiguous | after turning: success | wrong '
+             '| turned until confident [°] (median) |', '|---|---|---|---|---|---|---|---|']
+    for name, rr in sorted(group(tests.get('kidnap_turn', []), lambda r: r['map']).items()):
+        n = len(rr)
+        turned = [r['turned_deg'] for r in rr if r['resolved_success'] and not r['single_success']]
+        lines.append(f'| {name} | {n} | {pct(sum(r["single_success"] and r["single_ok"] for r in rr) / n)} '
+                     f'| {pct(sum(r["single_success"] and not r["single_ok"] for r in rr) / n)} '
+                     f'| {pct(sum(r["single_outcome"] == "ambiguous" for r in rr) / n)} '
+                     f'| {pct(sum(r["resolved_success"] and r["resolved_ok"] for r in rr) / n)} '
+                     f'| {pct(sum(r["resolved_success"] and not r["resolved_ok"] for r in rr) / n)} '
+                     f'| {np.median(turned):.0f} |' if turned else
+                     f'| {name} | {n} | {pct(sum(r["single_success"] and r["single_ok"] for r in rr) / n)} '
+                     f'| {pct(sum(r["single_success"] and not r["single_ok"] for r in rr) / n)} '
+                     f'| {pct(sum(r["single_outcome"] == "ambiguous" for r in rr) / n)} '
+                     f'| {pct(sum(r["resolved_success"] and r["resolved_ok"] for r in rr) / n)} '
+                     f'| {pct(sum(r["resolved_success"] and not r["resolved_ok"] for r in rr) / n)} | – |')
+    lines += ['', 'Watch: circling in the map\'s most open spot with a correct pose (lost alarms), then a kidnap '
+              'with the believed pose left behind: simulated seconds until a confident pose is published '
+              '(3 s of low fit, then the search).', '',
+              '| map | minutes driven | lost alarms per hour | kidnap: pose published | right | seconds to pose |',
+              '|---|---|---|---|---|---|']
+    kidnaps = {r['map']: r for r in tests.get('kidnap_watch', [])}
+    for r in sorted(tests.get('false_alarms', []), key=lambda r: r['map']):
+        k = kidnaps.get(r['map'], {})
+        lines.append(f'| {r["map"]} | {r["minutes"]:g} | {60 * r["alarms"] / r["minutes"]:.1f} '
+                     f'| {k.get("published")} | {k.get("ok")} | {k.get("seconds_to_pose")} |')
+    lines += ['', 'Fit (field score x (1 - share of beams through walls)) at the true pose and at a random free '
+              'pose - what the supervisor\'s `lost_fit` (0.4) and `degraded_fit` (0.5) stand between:', '',
+              '| scans | n | true: 1st pct | 5th | median | random: median | 95th | 99th |',
+              '|---|---|---|---|---|---|---|---|']
+    for source, rr in sorted(group(tests.get('fit', []), lambda r: r['source']).items()):
+        t, x = np.array([r['true_fit'] for r in rr]), np.array([r['random_fit'] for r in rr])
+        lines.append(f'| {source} | {len(rr)} | ' + ' | '.join(f'{v:.2f}' for v in (
+            *np.percentile(t, [1, 5, 50]), *np.percentile(x, [50, 95, 99]))) + ' |')
     return lines + ['']
 
 

@@ -17,6 +17,7 @@ from ..core.transform import Rigid2D
 from ..sim.laser import LaserConfig
 from ..sim.raycast import points_cut_from_map, sample_free_poses
 from ..sim.simulator import BASE_T_LASER, Simulator
+from ..sim.synthetic_maps import aisles_with_a_box, symmetric_room
 from .carmen import LogGrid, held_out_folds, read_flaser
 
 THESIS_METHODS = ['template_ccoeff', 'template_sqdiff', 'features_orb', 'features_sift']
@@ -109,6 +110,12 @@ def sim_trials(maps: dict[str, OccupancyMap], poses_per_map: int, seed: int) -> 
         finally:
             plain.close()
     return trials
+
+
+def symmetric_maps() -> dict[str, OccupancyMap]:
+    """Places one scan cannot tell apart: the four-fold room (nothing can), the store
+    whose twin aisles a box behind the robot tells apart."""
+    return {'symmetric_room': symmetric_room(), 'aisles_with_a_box': aisles_with_a_box()}
 
 
 PRIOR_RADII = (0.0, 10.0, 4.0, 1.5)    # m; 0: no prior (the whole map)

@@ -1,0 +1,149 @@
+"""The `relocalization` suite: what keeping a robot localized without a person costs and
+gains, in the pybullet simulator with its wheel odometry (no ROS; the same core pieces
+the server runs: Localizer, MotionResolver, Supervisor).
+
+- Kidnap and turn: the robot is put at a seeded free pose; one scan is localized; when
+  the answer is ambiguous the robot turns in place (0.4 rad/s, one turn at most) and the
+  hypotheses are followed with odometry until one wins. Single-scan vs resolved success,
+  confident-but-wrong for both, the angle turned until confident.
+- Watch: the robot circles in the map's most open spot with the localizer's pose correct
+  (the truth): lost alarms per hour. Then it is kidnapped while the believed pose stays
+  at the old place: the time (simulated) until a confident pose is published.
+"""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from ..core.localizer import Localizer
+from ..core.motion import MotionConfig, MotionResolver
+from ..core.outcome import Outcome
+from ..core.scan import scan_to_points
+from ..core.supervisor import Health, Supervisor, SupervisorConfig
+from ..core.transform import Rigid2D, pose_correct
+from ..sim.raycast import sample_free_poses
+from ..sim.simulator import BASE_T_LASER, Simulator
+
+TICK = 0.1            # s: the simulator's scan period
+TURN_RATE = 0.4       # rad/s, the server's default rotate_speed
+HEALTH_PERIOD = 0.5   # s
+
+
+def fitter(matcher, points):
+    """base pose -> (fit, refined base pose), as the server scores a tracked pose."""
+    def fit(base):
+        score, through, laser = matcher.fit_at(points, base * BASE_T_LASER)
+        return score * (1.0 - through), laser * BASE_T_LASER.inverse()
+    return fit
+
+
+def kidnap_and_turn(name, m, localizer, sim, pose) -> dict:
+    sim.place(pose)
+    result = localizer.localize(sim.scan(), base_T_laser=BASE_T_LASER)
+    row = {'suite': 'relocalization', 'test': 'kidnap_turn', 'map': name, 'single_outcome': result.outcome.label,
+           'single_ok': bool(result.pose is not None and pose_correct(result.pose, sim.true_pose())),
+           'single_success': result.success, 'turned_deg': 0.0}
+    row['resolved_success'], row['resolved_ok'] = row['single_success'], row['single_ok']
+    if result.outcome != Outcome.AMBIGUOUS:
+        return row
+    matcher, c = localizer.matcher('bnb'), localizer.config.bnb
+    resolver = MotionResolver([h.pose for h in result.hypotheses], MotionConfig(lead=c.min_confidence *
+                                                                                (1.0 - c.keep_ratio)))
+    winner = None
+    for _ in range(int(2 * math.pi / TURN_RATE / TICK)):
+        before = sim.odom
+        sim.drive(0.0, TURN_RATE, TICK)
+        winner = resolver.update(before.inverse() * sim.odom, fitter(matcher, scan_to_points(sim.scan())))
+        if winner is not None:
+            break
+    sim.drive(0.0, 0.0, TICK)
+    row.update(turned_deg=round(math.degrees(resolver.turned), 1), resolved_success=winner is not None,
+               resolved_ok=bool(winner is not None and pose_correct(winner.pose, sim.true_pose())))
+    return row
+
+
+def open_spot(m):
+    """The free cell farthest from anything not free, and that distance (m)."""
+    d = cv2.distanceTransform(m.free.astype(np.uint8), cv2.DIST_L2, 5) * m.resolution
+    r, c = np.unravel_index(int(np.argmax(d)), d.shape)
+    return m.frame.pixel_to_world([[c, r]])[0], float(d[r, c])
+
+
+def watch(name, m, localizer, sim, minutes: float, rng) -> list[dict]:
+    """Circling with a correct pose (false alarms), then a kidnap (time to a published pose)."""
+    (cx, cy), clearance = open_spot(m)
+    radius = min(1.0, max(0.3, clearance - 0.6))
+    sim.place(Rigid2D(cx, cy - radius, 0.0))
+    matcher = localizer.matcher('bnb')
+    config = SupervisorConfig(auto_relocalize=True)
+    sup = Supervisor(config, now=0.0)
+    sup.on_pose(0.0)
+    alarms, t, steps = 0, 0.0, int(minutes * 60 / TICK)
+    for k in range(steps):
+        sim.drive(0.24, 0.24 / radius, TICK)
+        t += TICK
+        if k % int(HEALTH_PERIOD / TICK) == 0:
+            fit, _ = fitter(matcher, scan_to_points(sim.scan()))(sim.true_pose())
+            before = sup.health
+            if sup.on_fit(t, fit) == Health.LOST and before != Health.LOST:
+                alarms += 1
+    rows = [{'suite': 'relocalization', 'test': 'false_alarms', 'map': name, 'minutes': minutes, 'alarms': alarms}]
+    # the kidnap: the believed pose stays where it was, moved by the odometry
+    believed, odom_then = sim.true_pose(), sim.odom
+    target = sample_free_poses(m, 1, rng, clearance=0.5)[0]
+    sim.place(target)
+    t0 = t
+    published = None
+    while t - t0 < 30.0 and published is None:
+        sim.drive(0.0, 0.0, TICK)
+        t += TICK
+        fit, _ = fitter(matcher, scan_to_points(sim.scan()))(believed * (odom_then.inverse() * sim.odom))
+        sup.on_fit(t, fit)
+        if sup.should_relocalize(t):
+            sup.started_relocalization(t)
+            result = localizer.localize(sim.scan(), base_T_laser=BASE_T_LASER)
+            t += result.time_s            # the search's own time, in simulated time too
+            sup.finished_relocalization(t, published=result.success, ambiguous=result.outcome == Outcome.AMBIGUOUS)
+            if result.success:
+                published = result
+    rows.append({'suite': 'relocalization', 'test': 'kidnap_watch', 'map': name,
+                 'published': published is not None,
+                 'ok': bool(published is not None and pose_correct(published.pose, sim.true_pose())),
+                 'seconds_to_pose': round(t - t0, 2) if published is not None else None})
+    return rows
+
+
+def fit_row(source: str, matcher, m, points, truth_laser: Rigid2D, rng) -> dict:
+    """The fit at the true laser pose and at a random free pose (the supervisor's thresholds)."""
+    def fit(laser):
+        score, through, _ = matcher.fit_at(points, laser)
+        return round(score * (1.0 - through), 4)
+    return {'suite': 'relocalization', 'test': 'fit', 'source': source, 'true_fit': fit(truth_laser),
+            'random_fit': fit(sample_free_poses(m, 1, rng)[0])}
+
+
+def relocalization_rows(maps: dict, poses_per_map: int, watch_minutes: float, seed: int,
+                        carmen_trials=(), carmen_maps=None) -> list[dict]:
+    """Every row of the suite: kidnap-and-turn and watch per map, fits at true and random poses."""
+    rows = []
+    for i, (name, m) in enumerate(maps.items()):
+        rng = np.random.default_rng(seed + 300 + i)
+        localizer = Localizer(m)
+        sim = Simulator(m, seed=seed + i)
+        try:
+            for pose in sample_free_poses(m, poses_per_map, rng, clearance=0.5):
+                rows.append(kidnap_and_turn(name, m, localizer, sim, pose))
+                rows.append(fit_row('sim', localizer.matcher('bnb'), m, scan_to_points(sim.scan()),
+                                    sim.laser_pose(), rng))
+            rows += watch(name, m, localizer, sim, watch_minutes, rng)
+        finally:
+            sim.close()
+    rng = np.random.default_rng(seed + 400)
+    localizers = {}
+    for t in carmen_trials:
+        m = carmen_maps[t.map_name]
+        loc = localizers.setdefault(t.map_name, Localizer(m))
+        rows.append(fit_row('carmen', loc.matcher('bnb'), m, scan_to_points(t.scan), t.truth, rng))
+    return rows
