@@ -100,3 +100,27 @@ def test_motion_never_picks_one_of_perfect_twins():
     assert len(resolver.tracks) == 4 and resolver.turned > math.pi
     assert any(t.pose.distance_to(pose)[0] < 0.1 for t in resolver.tracks)
     assert_pose_near(min(resolver.tracks, key=lambda t: t.pose.distance_to(pose)[0]).pose, pose, 0.1, 2.0)
+
+
+def test_scans_of_the_way_fused_into_one_view_settle_what_one_scan_cannot():
+    """Twin aisle ends: one 180 deg / 2.5 m look is ambiguous; the looks of one turn, fused
+    with the odometry, are one place - and in a symmetric room they stay ambiguous."""
+    from global_loc.core.motion import fuse_scans
+    from global_loc.sim.synthetic_maps import aisles_with_a_box
+    cases = [(aisles_with_a_box(), Rigid2D(4.0, 4.4, math.pi / 2), dict(fov_deg=180.0, num_beams=361, range_max=2.5),
+              Outcome.LOCALIZED),
+             (symmetric_room(), Rigid2D(2.0, 1.4, 0.4), dict(fov_deg=360.0, num_beams=720, range_max=20.0),
+              Outcome.AMBIGUOUS)]
+    for m, truth, laser, outcome in cases:
+        rng = np.random.default_rng(1)
+        localizer = Localizer(m)
+        seen, pose = [], truth
+        for _ in range(20):
+            seen.append((pose, scan_to_points(simulate_scan(m, pose, rng=rng, noise_std=0.005, **laser))))
+            pose = pose * Rigid2D(0.0, 0.0, 0.3)
+        assert localizer.localize(simulate_scan(m, truth, rng=rng, noise_std=0.005, **laser)).outcome == \
+            Outcome.AMBIGUOUS
+        fused = localizer.localize_points(fuse_scans(seen), 'bnb')
+        assert fused.outcome == outcome, fused.message
+        if outcome == Outcome.LOCALIZED:
+            assert_pose_near(fused.pose, seen[-1][0], 0.1, 2.0)

@@ -6,7 +6,8 @@ confident single-scan answer needs wins. Sums, not means: the views that tell tw
 apart may be a few of many (a box seen only while facing one way), and a mean dilutes
 them; twins' sums differ only by noise, which grows with the square root of the number
 of scans, far slower than a real lead. A view that never tells them apart (a perfectly
-symmetric room) never lets one win.
+symmetric room) never lets one win. When following does not settle it, the scans seen on
+the way, fused into one odometry-aligned view (`fuse_scans`), can be searched again.
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from .scan import ScanPoints
 from .transform import Rigid2D
 
 # base pose -> (fit, refined base pose)
@@ -74,3 +76,14 @@ class MotionResolver:
         best = self.tracks[0]
         second = self.tracks[1].total if len(self.tracks) > 1 else 0.0
         return best if best.total > 0 and best.total - second >= c.lead * c.lead_scans * best.evidence else None
+
+
+def fuse_scans(scans: list[tuple[Rigid2D, ScanPoints]]) -> ScanPoints:
+    """Scans taken along the way, as one "scan" seen from the last one's laser pose:
+    each scan's points moved by the odometry between its pose and the last (laser poses in
+    the odometry frame). A longer view is far more distinctive than any one of them; its
+    points are not beams from one origin, so the free-space check does not apply."""
+    last = scans[-1][0].inverse()
+    points = np.vstack([(last * pose).apply(p.points) for pose, p in scans])
+    reach = float(np.hypot(points[:, 0], points[:, 1]).max()) if len(points) else 0.0
+    return ScanPoints(points, max(reach, max(p.range_max for _, p in scans)), len(points), beams=False)

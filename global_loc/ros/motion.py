@@ -11,7 +11,7 @@ import time
 from geometry_msgs.msg import Twist, Vector3
 
 from ..core.localizer import Hypothesis, LocalizationResult
-from ..core.motion import MotionConfig, MotionResolver
+from ..core.motion import MotionConfig, MotionResolver, fuse_scans
 from ..core.outcome import Outcome
 from ..core.scan import ScanError, scan_to_points
 from ..core.transform import Rigid2D
@@ -37,7 +37,7 @@ def resolve_by_motion(node, goal, result: LocalizationResult, first_scan, base_T
     last_stamp, since = stamp_seconds(first_scan.header.stamp), start
     node.get_logger().info(f'resolving by motion: {len(resolver.tracks)} hypotheses, up to '
                            f'{goal.resolve_by_motion_s:.0f} s' + (', turning in place' if goal.rotate_in_place else ''))
-    winner = None
+    winner, seen = None, []        # seen: (laser pose in the odometry frame, points) of the scans on the way
     try:
         while time.monotonic() < deadline and winner is None:
             turning = goal.rotate_in_place and time.monotonic() - start < turn_s
@@ -52,6 +52,9 @@ def resolve_by_motion(node, goal, result: LocalizationResult, first_scan, base_T
                 points = scan_to_points(scan_from_msg(msg))
             except ScanError:
                 continue
+            odom = node.odom_history.at(stamp)
+            if odom is not None:
+                seen.append((odom * base_T_laser, points))
 
             def fit(base_pose, points=points):
                 score, through, laser = matcher.fit_at(points, base_pose * base_T_laser)
@@ -64,7 +67,12 @@ def resolve_by_motion(node, goal, result: LocalizationResult, first_scan, base_T
         node.cmd_vel_pub.publish(Twist())       # stop, however this ends
     hypotheses = [Hypothesis(t.pose, t.evidence) for t in resolver.tracks]
     moved = f'{resolver.travelled:.2f} m and {math.degrees(resolver.turned):.0f} deg'
-    if winner is None:
+    if winner is None and len(seen) > 1 and not cancelled():
+        fused = node.localizer.localize_points(fuse_scans(seen[::3] + seen[-1:]), 'bnb', base_T_laser=base_T_laser)
+        if fused.success:
+            node.get_logger().info(f'the scans of the way, fused, settle it: {fused.message}')
+            return dataclasses.replace(fused, message=f'localized by motion: the scans seen over {moved}, fused '
+                                                      f'into one view, match one place')
         return dataclasses.replace(result, hypotheses=hypotheses, pose=hypotheses[0].pose if hypotheses else None,
                                    message=f'ambiguous after {time.monotonic() - start:.0f} s of motion ({moved}): '
                                            f'{len(hypotheses)} place(s) still match; see the hypotheses')
