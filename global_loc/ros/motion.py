@@ -33,14 +33,13 @@ def resolve_by_motion(node, goal, result: LocalizationResult, first_scan, base_T
                                                                                 (1.0 - c.keep_ratio)))
     start = time.monotonic()
     deadline = start + goal.resolve_by_motion_s
-    turn_s = 2 * math.pi / node.settings.rotate_speed
     last_stamp, since = stamp_seconds(first_scan.header.stamp), start
     node.get_logger().info(f'resolving by motion: {len(resolver.tracks)} hypotheses, up to '
                            f'{goal.resolve_by_motion_s:.0f} s' + (', turning in place' if goal.rotate_in_place else ''))
     winner, seen = None, []        # seen: (laser pose in the odometry frame, points) of the scans on the way
     try:
         while time.monotonic() < deadline and winner is None:
-            turning = goal.rotate_in_place and time.monotonic() - start < turn_s
+            turning = goal.rotate_in_place and resolver.turned < 2 * math.pi     # one turn, by the odometry
             node.cmd_vel_pub.publish(Twist(angular=Vector3(z=float(node.settings.rotate_speed) if turning else 0.0)))
             msg = node.scans.wait_after(since, max(0.0, deadline - since), cancelled)
             if msg is None:
