@@ -4,7 +4,8 @@ the server runs: Localizer, MotionResolver, Supervisor).
 
 - Kidnap and turn: the robot is put at a seeded free pose; one scan is localized; when
   the answer is ambiguous the robot turns in place (0.4 rad/s, one turn at most) and the
-  hypotheses are followed with odometry until one wins. Single-scan vs resolved success,
+  hypotheses are followed with odometry until one wins (else the turn's scans, fused into
+  one view, are searched again). Single-scan vs resolved success,
   confident-but-wrong for both, the angle turned until confident.
 - Watch: the robot circles in the map's most open spot with the localizer's pose correct
   (the truth): lost alarms per hour. Then it is kidnapped while the believed pose stays
@@ -18,7 +19,7 @@ import cv2
 import numpy as np
 
 from ..core.localizer import Localizer
-from ..core.motion import MotionConfig, MotionResolver
+from ..core.motion import MotionConfig, MotionResolver, fuse_scans
 from ..core.outcome import Outcome
 from ..core.scan import scan_to_points
 from ..core.supervisor import Health, Supervisor, SupervisorConfig
@@ -51,16 +52,22 @@ def kidnap_and_turn(name, m, localizer, sim, pose) -> dict:
     matcher, c = localizer.matcher('bnb'), localizer.config.bnb
     resolver = MotionResolver([h.pose for h in result.hypotheses], MotionConfig(lead=c.min_confidence *
                                                                                 (1.0 - c.keep_ratio)))
-    winner = None
+    winner, seen = None, []
     for _ in range(int(2 * math.pi / TURN_RATE / TICK)):
         before = sim.odom
         sim.drive(0.0, TURN_RATE, TICK)
-        winner = resolver.update(before.inverse() * sim.odom, fitter(matcher, scan_to_points(sim.scan())))
+        points = scan_to_points(sim.scan())
+        seen.append((sim.odom * BASE_T_LASER, points))
+        winner = resolver.update(before.inverse() * sim.odom, fitter(matcher, points))
         if winner is not None:
             break
     sim.drive(0.0, 0.0, TICK)
-    row.update(turned_deg=round(math.degrees(resolver.turned), 1), resolved_success=winner is not None,
-               resolved_ok=bool(winner is not None and pose_correct(winner.pose, sim.true_pose())))
+    pose = None if winner is None else winner.pose
+    if winner is None:        # as the server does: the scans of the turn, fused into one view
+        fused = localizer.localize_points(fuse_scans(seen[::3] + seen[-1:]), 'bnb', base_T_laser=BASE_T_LASER)
+        pose = fused.pose if fused.success else None
+    row.update(turned_deg=round(math.degrees(resolver.turned), 1), resolved_success=pose is not None,
+               resolved_ok=bool(pose is not None and pose_correct(pose, sim.true_pose())))
     return row
 
 

@@ -168,7 +168,8 @@ def relocalization_section(rows) -> list[str]:
     lines = ['## Keeping a robot localized (relocalization suite)', '',
              'Kidnap and turn: one scan at a seeded free pose; when the answer is ambiguous the robot turns in '
              'place (0.4 rad/s, one turn at most) and the hypotheses are followed with the simulated wheel '
-             'odometry until one leads. "success": marked success and right (0.2 m / 5°); "wrong": marked '
+             'odometry until one leads (else the turn\'s scans, fused into one view, are searched again). '
+             '"success": marked success and right (0.2 m / 5°); "wrong": marked '
              'success but wrong.', '',
              '| map | n | single scan: success | wrong | ambiguous | after turning: success | wrong '
              '| turned until confident [°] (median) |', '|---|---|---|---|---|---|---|---|']
