@@ -35,8 +35,13 @@ class FakeLocalizer(TopicRecorder):
         self.set_pose = self.node.create_publisher(PoseStamped, '/sim/set_pose', reliable())
         self.node.create_timer(0.2, self.tick)
 
-    def truth(self) -> Rigid2D:
-        return pose_from_msg(self.messages['/sim/true_pose'][-1].pose)
+    def truth(self, stamp=None) -> Rigid2D:
+        """The true pose now, or at a stamp (the simulator stamps scans and truth alike)."""
+        msgs = self.messages['/sim/true_pose']
+        if stamp is not None:
+            msgs = [m for m in msgs if m.header.stamp == stamp]
+            assert msgs, f'no true pose stamped {stamp}'
+        return pose_from_msg(msgs[-1].pose)
 
     def tick(self):
         stamp = self.node.get_clock().now().to_msg()
@@ -61,6 +66,10 @@ class FakeLocalizer(TopicRecorder):
                 return True
             time.sleep(0.1)
         return False
+
+    def stop(self) -> int:
+        self.close()
+        return 0
 
     def teleport(self, pose: Rigid2D) -> None:
         msg = PoseStamped()
@@ -127,48 +136,43 @@ def test_a_kidnapped_robot_is_found_lost_and_relocalized_without_a_goal(tmp_path
 LASER_180 = ['fov_deg:=180.0', 'num_beams:=361', 'range_max:=2.5']
 
 
-def test_an_ambiguous_aisle_end_is_settled_by_turning_in_place(tmp_path, processes):
-    save_map_yaml(aisles_with_a_box(), tmp_path / 'store.yaml')
+def start_world(tmp_path, processes, occupancy_map, start: Rigid2D, *laser) -> tuple[dict, FakeLocalizer]:
+    """A map saved, a localizer stand-in, the simulator at `start` and the server on that map."""
+    map_yaml = tmp_path / 'world.yaml'
+    save_map_yaml(occupancy_map, map_yaml)
     env = isolated_env()
     amcl = FakeLocalizer(env)
-    try:
-        processes.append(start_sim(env, tmp_path / 'sim.log', f'map_yaml:={tmp_path / "store.yaml"}', 'x:=4.0',
-                                   'y:=4.3', f'yaw:={math.pi / 2}', *LASER_180))
-        processes.append(start_server(env, tmp_path / 'server.log', f'map_yaml:={tmp_path / "store.yaml"}',
-                                      LASER_X))
-        assert amcl.wait_for_publisher('/initialpose')
-        alone = json.loads(run_client(env, '--json', '--timeout', '10', '--no-publish').stdout)
-        assert alone['outcome'] == 'ambiguous' and len(alone['hypotheses']) >= 2, alone
-        out = run_client(env, '--json', '--timeout', '10', '--resolve-by-motion', '40', '--rotate-in-place')
-        result = json.loads(out.stdout)
-        assert result['outcome'] == 'localized' and 'by motion' in result['message'], result
-        published = amcl.wait_for('/initialpose', 1)
-        assert len(published) == 1
-        assert_pose_near(pose_from_msg(published[0].pose.pose), amcl.truth())
-        time.sleep(0.5)
-        last = amcl.messages['/cmd_vel'][-1]
-        assert last.angular.z == 0.0 and last.linear.x == 0.0           # stopped
-    finally:
-        amcl.close()
+    processes.append(amcl)
+    processes.append(start_sim(env, tmp_path / 'sim.log', f'map_yaml:={map_yaml}', f'x:={start.x}', f'y:={start.y}',
+                               f'yaw:={start.yaw}', *laser))
+    processes.append(start_server(env, tmp_path / 'server.log', f'map_yaml:={map_yaml}', LASER_X))
+    assert amcl.wait_for_publisher('/initialpose')
+    return env, amcl
+
+
+def test_an_ambiguous_aisle_end_is_settled_by_turning_in_place(tmp_path, processes):
+    env, amcl = start_world(tmp_path, processes, aisles_with_a_box(), Rigid2D(4.0, 4.3, math.pi / 2), *LASER_180)
+    alone = json.loads(run_client(env, '--json', '--timeout', '10', '--no-publish').stdout)
+    assert alone['outcome'] == 'ambiguous' and len(alone['hypotheses']) >= 2, alone
+    out = run_client(env, '--json', '--timeout', '10', '--resolve-by-motion', '120', '--rotate-in-place', timeout=200)
+    result = json.loads(out.stdout)
+    assert result['outcome'] == 'localized' and 'by motion' in result['message'], result
+    published = amcl.wait_for('/initialpose', 1)
+    assert len(published) == 1       # the robot's pose at the last scan used (it turned on until stopped)
+    assert_pose_near(pose_from_msg(published[0].pose.pose), amcl.truth(published[0].header.stamp))
+    time.sleep(0.5)
+    last = amcl.messages['/cmd_vel'][-1]
+    assert last.angular.z == 0.0 and last.linear.x == 0.0           # stopped
 
 
 def test_a_symmetric_room_stays_ambiguous_after_turning_and_publishes_nothing(tmp_path, processes):
-    save_map_yaml(symmetric_room(), tmp_path / 'square.yaml')
-    env = isolated_env()
-    amcl = FakeLocalizer(env)
-    try:
-        processes.append(start_sim(env, tmp_path / 'sim.log', f'map_yaml:={tmp_path / "square.yaml"}', 'x:=2.0',
-                                   'y:=1.4', 'yaw:=0.4', 'fov_deg:=360.0', 'num_beams:=720'))
-        processes.append(start_server(env, tmp_path / 'server.log', f'map_yaml:={tmp_path / "square.yaml"}',
-                                      LASER_X))
-        assert amcl.wait_for_publisher('/initialpose')
-        out = run_client(env, '--json', '--timeout', '10', '--resolve-by-motion', '12', '--rotate-in-place')
-        result = json.loads(out.stdout)
-        assert result['outcome'] == 'ambiguous' and result['message'].startswith('ambiguous after'), result
-        assert len(result['hypotheses']) >= 2
-        time.sleep(1.0)
-        assert amcl.messages['/initialpose'] == []
-        assert any(m.angular.z > 0 for m in amcl.messages['/cmd_vel'])      # it did turn ...
-        assert amcl.messages['/cmd_vel'][-1].angular.z == 0.0                # ... and stopped
-    finally:
-        amcl.close()
+    env, amcl = start_world(tmp_path, processes, symmetric_room(), Rigid2D(2.0, 1.4, 0.4), 'fov_deg:=360.0',
+                            'num_beams:=720')
+    out = run_client(env, '--json', '--timeout', '10', '--resolve-by-motion', '12', '--rotate-in-place')
+    result = json.loads(out.stdout)
+    assert result['outcome'] == 'ambiguous' and result['message'].startswith('ambiguous after'), result
+    assert len(result['hypotheses']) >= 2
+    time.sleep(1.0)
+    assert amcl.messages['/initialpose'] == []
+    assert any(m.angular.z > 0 for m in amcl.messages['/cmd_vel'])      # it did turn ...
+    assert amcl.messages['/cmd_vel'][-1].angular.z == 0.0                # ... and stopped

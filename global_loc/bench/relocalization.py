@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from ..core.localizer import Localizer
-from ..core.motion import MotionConfig, MotionResolver, fuse_scans
+from ..core.motion import MotionConfig, MotionResolver, settle
 from ..core.outcome import Outcome
 from ..core.scan import scan_to_points
 from ..core.supervisor import Health, Supervisor, SupervisorConfig
@@ -53,19 +53,19 @@ def kidnap_and_turn(name, m, localizer, sim, pose) -> dict:
     resolver = MotionResolver([h.pose for h in result.hypotheses], MotionConfig(lead=c.min_confidence *
                                                                                 (1.0 - c.keep_ratio)))
     winner, seen = None, []
-    for _ in range(int(2 * math.pi / TURN_RATE / TICK)):
+    for k in range(int(2 * math.pi / TURN_RATE / TICK)):
         before = sim.odom
         sim.drive(0.0, TURN_RATE, TICK)
         points = scan_to_points(sim.scan())
         seen.append((sim.odom * BASE_T_LASER, points))
-        winner = resolver.update(before.inverse() * sim.odom, fitter(matcher, points))
-        if winner is not None:
-            break
+        leader = resolver.update(before.inverse() * sim.odom, fitter(matcher, points))
+        if leader is not None and k % int(1.0 / TICK) == 0:       # as the server: a check at most once a second
+            winner = settle(localizer, seen, BASE_T_LASER, leader.pose)
+            if winner is not None:
+                break
     sim.drive(0.0, 0.0, TICK)
+    winner = winner or settle(localizer, seen, BASE_T_LASER)
     pose = None if winner is None else winner.pose
-    if winner is None:        # as the server does: the scans of the turn, fused into one view
-        fused = localizer.localize_points(fuse_scans(seen[::3] + seen[-1:]), 'bnb', base_T_laser=BASE_T_LASER)
-        pose = fused.pose if fused.success else None
     row.update(turned_deg=round(math.degrees(resolver.turned), 1), resolved_success=pose is not None,
                resolved_ok=bool(pose is not None and pose_correct(pose, sim.true_pose())))
     return row

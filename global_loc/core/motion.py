@@ -2,12 +2,13 @@
 answer are followed with odometry; each new scan is scored at each of them (refined
 locally: cheap) and the fits add up. Once the robot has moved far enough, the first
 hypothesis whose summed fit leads the next by `lead_scans` scans' worth of the margin a
-confident single-scan answer needs wins. Sums, not means: the views that tell twins
-apart may be a few of many (a box seen only while facing one way), and a mean dilutes
-them; twins' sums differ only by noise, which grows with the square root of the number
-of scans, far slower than a real lead. A view that never tells them apart (a perfectly
-symmetric room) never lets one win. When following does not settle it, the scans seen on
-the way, fused into one odometry-aligned view (`fuse_scans`), can be searched again.
+confident single-scan answer needs is the leader. Sums, not means: the views that tell
+twins apart may be a few of many (a box seen only while facing one way), and a mean
+dilutes them; twins' sums differ only by noise, which grows with the square root of the
+number of scans, far slower than a real lead. The leader wins once the scans seen on the
+way, fused into one odometry-aligned view and searched over the whole map, confidently
+agree (`settle`); without a leader the fused view alone may settle it. A view that never
+tells the places apart (a perfectly symmetric room) never lets one win.
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from .scan import ScanPoints
-from .transform import Rigid2D
+from .transform import Rigid2D, pose_correct
 
 # base pose -> (fit, refined base pose)
 FitFn = Callable[[Rigid2D], tuple[float, Rigid2D]]
@@ -87,3 +88,18 @@ def fuse_scans(scans: list[tuple[Rigid2D, ScanPoints]]) -> ScanPoints:
     points = np.vstack([(last * pose).apply(p.points) for pose, p in scans])
     reach = float(np.hypot(points[:, 0], points[:, 1]).max()) if len(points) else 0.0
     return ScanPoints(points, max(reach, max(p.range_max for _, p in scans)), len(points), beams=False)
+
+
+def settle(localizer, seen: list[tuple[Rigid2D, ScanPoints]], base_T_laser: Rigid2D,
+           candidate: Optional[Rigid2D] = None):
+    """The scans seen on the way (laser poses in the odometry frame, points), fused into
+    one view and searched over the whole map: the result when it is confident and agrees
+    with `candidate` (the leader of the followed hypotheses, when there is one), else None.
+    A leader alone is never enough: a hypothesis can slide along a featureless wall while
+    it is followed; the fused view does not depend on the followed hypotheses at all."""
+    if len(seen) < 2:
+        return None
+    fused = localizer.localize_points(fuse_scans(seen[::3] + seen[-1:]), 'bnb', base_T_laser=base_T_laser)
+    if not fused.success or (candidate is not None and not pose_correct(fused.pose, candidate)):
+        return None
+    return fused

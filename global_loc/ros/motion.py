@@ -11,21 +11,21 @@ import time
 from geometry_msgs.msg import Twist, Vector3
 
 from ..core.localizer import Hypothesis, LocalizationResult
-from ..core.motion import MotionConfig, MotionResolver, fuse_scans
-from ..core.outcome import Outcome
+from ..core.motion import MotionConfig, MotionResolver, settle
 from ..core.scan import ScanError, scan_to_points
 from ..core.transform import Rigid2D
 from .convert import scan_from_msg, stamp_seconds
 
 
 def resolve_by_motion(node, goal, result: LocalizationResult, first_scan, base_T_laser: Rigid2D, cancelled,
-                      feedback) -> LocalizationResult:
-    """Follow `result`'s hypotheses for up to goal.resolve_by_motion_s; the winner as a
-    localized result, or the result still ambiguous with the hypotheses left."""
+                      feedback) -> tuple[LocalizationResult, object]:
+    """Follow `result`'s hypotheses for up to goal.resolve_by_motion_s: (the winner as a
+    localized result, or the result still ambiguous with the hypotheses left; the last
+    scan message used - the poses are the robot's at its stamp)."""
     odom = node.odom.wait_after(0.0, 2.0, cancelled)      # any odometry; a moment for a late first one
     if odom is None:
         return dataclasses.replace(result, message=f'{result.message} (no odometry on {node.settings.odom_topic}: '
-                                                   f'cannot resolve by motion)')
+                                                   f'cannot resolve by motion)'), first_scan
     matcher = node.localizer.matcher('bnb')
     laser_T_base = base_T_laser.inverse()
     c = matcher.options
@@ -36,7 +36,8 @@ def resolve_by_motion(node, goal, result: LocalizationResult, first_scan, base_T
     last_stamp, since = stamp_seconds(first_scan.header.stamp), start
     node.get_logger().info(f'resolving by motion: {len(resolver.tracks)} hypotheses, up to '
                            f'{goal.resolve_by_motion_s:.0f} s' + (', turning in place' if goal.rotate_in_place else ''))
-    winner, seen = None, []        # seen: (laser pose in the odometry frame, points) of the scans on the way
+    winner, leader, seen, checked = None, None, [], 0.0   # seen: (laser pose in the odometry frame, points)
+    last_scan = first_scan
     try:
         while time.monotonic() < deadline and winner is None:
             turning = goal.rotate_in_place and resolver.turned < 2 * math.pi     # one turn, by the odometry
@@ -46,6 +47,7 @@ def resolve_by_motion(node, goal, result: LocalizationResult, first_scan, base_T
                 break
             since = time.monotonic()
             stamp = stamp_seconds(msg.header.stamp)
+            last_scan = msg
             motion, last_stamp = node.odom_history.motion(last_stamp, stamp) or Rigid2D(), stamp
             try:
                 points = scan_to_points(scan_from_msg(msg))
@@ -59,24 +61,23 @@ def resolve_by_motion(node, goal, result: LocalizationResult, first_scan, base_T
                 score, through, laser = matcher.fit_at(points, base_pose * base_T_laser)
                 return score * (1.0 - through), laser * laser_T_base
 
-            winner = resolver.update(motion, fit)
+            leader = resolver.update(motion, fit)
+            if leader is not None and time.monotonic() - checked >= 1.0:    # a search: at most once a second
+                checked = time.monotonic()
+                winner = settle(node.localizer, seen, base_T_laser, leader.pose)
             feedback(0.95, 'resolving_by_motion', resolver.tracks[0].evidence if resolver.tracks else 0.0,
                      len(resolver.tracks))
     finally:
         node.cmd_vel_pub.publish(Twist())       # stop, however this ends
     hypotheses = [Hypothesis(t.pose, t.evidence) for t in resolver.tracks]
     moved = f'{resolver.travelled:.2f} m and {math.degrees(resolver.turned):.0f} deg'
-    if winner is None and len(seen) > 1 and not cancelled():
-        fused = node.localizer.localize_points(fuse_scans(seen[::3] + seen[-1:]), 'bnb', base_T_laser=base_T_laser)
-        if fused.success:
-            node.get_logger().info(f'the scans of the way, fused, settle it: {fused.message}')
-            return dataclasses.replace(fused, message=f'localized by motion: the scans seen over {moved}, fused '
-                                                      f'into one view, match one place')
+    how = 'one place led and the scans seen, fused into one view, confirm it'
+    if winner is None and not cancelled():
+        winner = settle(node.localizer, seen, base_T_laser)
+        how = 'the scans seen, fused into one view, match one place'
+    if winner is None:
         return dataclasses.replace(result, hypotheses=hypotheses, pose=hypotheses[0].pose if hypotheses else None,
                                    message=f'ambiguous after {time.monotonic() - start:.0f} s of motion ({moved}): '
-                                           f'{len(hypotheses)} place(s) still match; see the hypotheses')
-    second = hypotheses[1].score if len(hypotheses) > 1 else 0.0
-    confidence = min(1.0, (winner.evidence - second) / winner.evidence / (1.0 - c.keep_ratio))
-    return dataclasses.replace(result, outcome=Outcome.LOCALIZED, pose=winner.pose, score=winner.evidence,
-                               confidence=confidence, hypotheses=hypotheses,
-                               message=f'localized by motion: one place led after {moved}')
+                                           f'{len(hypotheses)} place(s) still match; see the hypotheses'), last_scan
+    return dataclasses.replace(winner, hypotheses=[Hypothesis(winner.pose, winner.score)] + hypotheses[1:],
+                               message=f'localized by motion after {moved}: {how}'), last_scan

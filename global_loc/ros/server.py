@@ -61,6 +61,7 @@ from .convert import (
     stamp_seconds,
 )
 from .motion import resolve_by_motion
+from .mounting import LaserMounting
 from .node_main import run_node
 from .parameters import declare_server_parameters
 from .rviz import hypotheses_msg, local_map_msg, markers_msg
@@ -85,7 +86,7 @@ class GlobalLocServer(LifecycleNode):
         self.watch = LocalizationWatch(self, supervisor_config)
         self.watch_timer = None
         self.cmd_vel_pub = self.create_publisher(Twist, self.settings.cmd_vel_topic, 10)
-        self.tf_buffer = self._make_tf_buffer()
+        self.mounting = LaserMounting(self, self.settings.base_frame, self.config.base_T_laser)
         self.pubs: dict = {}
         self.subs: list = []
         # The action and the services exist in every state, so a request while inactive gets a reason.
@@ -201,27 +202,6 @@ class GlobalLocServer(LifecycleNode):
             self.map_error = f'map not loaded: {e}'
             self.get_logger().error(self.map_error)
 
-    def _make_tf_buffer(self):
-        try:
-            import tf2_ros
-        except ImportError:
-            self.get_logger().info('tf2_ros not available: the laser mounting comes from laser_x/laser_y/laser_yaw')
-            return None
-        buffer = tf2_ros.Buffer()
-        self._tf_listener = tf2_ros.TransformListener(buffer, self)
-        return buffer
-
-    def base_T_laser(self, laser_frame: str) -> Rigid2D:
-        """The laser's mounting on the base: from tf2 when it has it, else the parameters."""
-        base = self.settings.base_frame
-        if self.tf_buffer is not None and laser_frame:
-            try:
-                t = self.tf_buffer.lookup_transform(base, laser_frame, Time()).transform
-                return Rigid2D(t.translation.x, t.translation.y, quaternion_to_yaw(t.rotation))
-            except Exception as e:   # tf2 raises several types; any means "not known"
-                self.get_logger().warn(f'no tf {base} <- {laser_frame} ({e}); using the laser_* parameters')
-        return self.config.base_T_laser
-
     # ---- requests -------------------------------------------------------------------------
     def on_goal(self, goal_request) -> GoalResponse:
         """Accept every goal; serve() ends it with an outcome if it cannot run."""
@@ -317,19 +297,18 @@ class GlobalLocServer(LifecycleNode):
                 last[0] = time.monotonic()
                 feedback(0.05 + 0.9 * fraction, 'matching', best)
 
-        scan = scan_from_msg(msg)
-        base_T_laser = self.base_T_laser(msg.header.frame_id)
+        base_T_laser = self.mounting.base_T_laser(msg.header.frame_id)
         try:
-            result = localizer.localize(scan, method=method, angle_step_deg=goal.angle_step_deg or None,
+            result = localizer.localize(scan_from_msg(msg), method=method, angle_step_deg=goal.angle_step_deg or None,
                                         progress=progress, base_T_laser=base_T_laser, region=region)
         except ScanError as e:
             return self.refuse(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
         if result.outcome == Outcome.AMBIGUOUS and goal.resolve_by_motion_s > 0:
-            result = resolve_by_motion(self, goal, result, msg, base_T_laser, cancelled, feedback)
+            result, msg = resolve_by_motion(self, goal, result, msg, base_T_laser, cancelled, feedback)
         out = result_to_msg(result, self.settings.map_frame, msg.header.stamp, time.monotonic() - start)
         out.scan_stamp = msg.header.stamp
         out.scan_age_s = (self.get_clock().now() - Time.from_msg(msg.header.stamp)).nanoseconds * 1e-9
-        self.show(result, scan, base_T_laser, msg.header.stamp, localizer.map.resolution)
+        self.show(result, scan_from_msg(msg), base_T_laser, msg.header.stamp, localizer.map.resolution)
         summary = result.message
         if result.pose is not None:
             summary += f': {format_pose(result.pose)}, score {result.score:.3f}, {result.time_s:.2f} s'

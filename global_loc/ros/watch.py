@@ -64,7 +64,7 @@ class LocalizationWatch:
             try:
                 points = scan_to_points(scan_from_msg(msg))
                 score, through, _ = node.localizer.matcher('bnb').fit_at(
-                    points, pose * node.base_T_laser(msg.header.frame_id))
+                    points, pose * node.mounting.base_T_laser(msg.header.frame_id))
                 with self.lock:
                     self.supervisor.on_fit(now, score * (1.0 - through))
             except ScanError:

@@ -75,6 +75,10 @@ class Simulator:
         caster = joints['caster_joint']
         p.changeDynamics(self.robot, caster, lateralFriction=0.0, rollingFriction=0.0, physicsClientId=self.client)
         self.clutter_ids = []
+        # pybullet places and reports a body by its centre of mass, not by its URDF link
+        # frame: base_link -> centre of mass (the URDF's inertial origin)
+        lx, ly, self.com_height = p.getDynamicsInfo(self.robot, -1, physicsClientId=self.client)[3]
+        self.base_T_com = Rigid2D(lx, ly, 0.0)
         self.odom = Rigid2D()                  # base_link in the odom frame (starts at the odom origin)
         self._odom_from = self.true_pose()
 
@@ -85,7 +89,8 @@ class Simulator:
 
     def place(self, pose: Rigid2D) -> None:
         """Teleport the robot (base_link) to a pose in the map frame, at rest."""
-        p.resetBasePositionAndOrientation(self.robot, [pose.x, pose.y, 0.0],
+        com = pose * self.base_T_com
+        p.resetBasePositionAndOrientation(self.robot, [com.x, com.y, self.com_height],
                                           p.getQuaternionFromEuler([0, 0, pose.yaw]), physicsClientId=self.client)
         p.resetBaseVelocity(self.robot, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
         self._odom_from = self.true_pose()
@@ -94,8 +99,9 @@ class Simulator:
                                     physicsClientId=self.client)
 
     def true_pose(self) -> Rigid2D:
+        """base_link in the map frame."""
         (x, y, _), q = p.getBasePositionAndOrientation(self.robot, physicsClientId=self.client)
-        return Rigid2D(x, y, p.getEulerFromQuaternion(q)[2])
+        return Rigid2D(x, y, p.getEulerFromQuaternion(q)[2]) * self.base_T_com.inverse()
 
     def drive(self, v: float, w: float, duration: float) -> None:
         """Drive the wheels for (v m/s, w rad/s) during `duration` seconds of simulated time."""
