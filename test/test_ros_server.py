@@ -227,3 +227,14 @@ def test_ambiguous_place_publishes_nothing_unless_asked(tmp_path):
         publisher.stop()
         listener.close()
         assert server.stop() == 0
+
+
+def test_bad_bnb_options_are_reported_and_the_server_still_answers(tmp_path):
+    env = isolated_env()
+    server = start_server(env, tmp_path / 'server.log', 'bnb.levels:=9')
+    try:
+        assert 'default method bnb: bnb levels must be 1 .. 7, got 9' in server.output()
+        code, result = localize(env, '--timeout', '1')
+        assert code == 1 and result['outcome'] == 'no_scan'
+    finally:
+        assert server.stop() == 0

@@ -44,7 +44,7 @@ from global_loc_interfaces.action import Localize
 
 from ..core.localizer import Localizer, check_angle_step
 from ..core.map_io import MapError, load_map_yaml
-from ..core.matchers import MethodError, resolve_method
+from ..core.matchers import resolve_method
 from ..core.outcome import Cancelled, Outcome
 from ..core.pose_history import PoseHistory
 from ..core.scan import ScanError, scan_to_points
@@ -186,8 +186,8 @@ class GlobalLocServer(LifecycleNode):
             self.get_logger().info(f'map {occupancy_map.source}: {occupancy_map.width} x {occupancy_map.height} '
                                    f'cells at {occupancy_map.resolution} m; {self.config.method} ready in '
                                    f'{time.perf_counter() - t0:.2f} s')
-        except MethodError as e:
-            self.get_logger().error(f'default method: {e}')
+        except ValueError as e:      # an unknown method (MethodError), bad bnb.* options
+            self.get_logger().error(f'default method {self.config.method}: {e}')
         self.localizer = localizer
 
     def on_odom(self, msg: Odometry) -> None:
