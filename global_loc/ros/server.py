@@ -299,16 +299,18 @@ class GlobalLocServer(LifecycleNode):
 
         base_T_laser = self.mounting.base_T_laser(msg.header.frame_id)
         try:
-            result = localizer.localize(scan_from_msg(msg), method=method, angle_step_deg=goal.angle_step_deg or None,
+            scan = scan_from_msg(msg)
+            result = localizer.localize(scan, method=method, angle_step_deg=goal.angle_step_deg or None,
                                         progress=progress, base_T_laser=base_T_laser, region=region)
         except ScanError as e:
             return self.refuse(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
         if result.outcome == Outcome.AMBIGUOUS and goal.resolve_by_motion_s > 0:
             result, msg = resolve_by_motion(self, goal, result, msg, base_T_laser, cancelled, feedback)
+            scan = scan_from_msg(msg)      # the poses are the robot's at the last scan used
         out = result_to_msg(result, self.settings.map_frame, msg.header.stamp, time.monotonic() - start)
         out.scan_stamp = msg.header.stamp
         out.scan_age_s = (self.get_clock().now() - Time.from_msg(msg.header.stamp)).nanoseconds * 1e-9
-        self.show(result, scan_from_msg(msg), base_T_laser, msg.header.stamp, localizer.map.resolution)
+        self.show(result, scan, base_T_laser, msg.header.stamp, localizer.map.resolution)
         summary = result.message
         if result.pose is not None:
             summary += f': {format_pose(result.pose)}, score {result.score:.3f}, {result.time_s:.2f} s'
