@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from ..core.localizer import Localizer
-from ..core.motion import MotionConfig, MotionResolver, settle
+from ..core.motion import MotionConfig, MotionResolver, pose_fitter, settle
 from ..core.outcome import Outcome
 from ..core.scan import scan_to_points
 from ..core.supervisor import Health, Supervisor, SupervisorConfig
@@ -32,14 +32,6 @@ TURN_RATE = 0.4       # rad/s, the server's default rotate_speed
 HEALTH_PERIOD = 0.5   # s
 
 
-def fitter(matcher, points):
-    """base pose -> (fit, refined base pose), as the server scores a tracked pose."""
-    def fit(base):
-        score, through, laser = matcher.fit_at(points, base * BASE_T_LASER)
-        return score * (1.0 - through), laser * BASE_T_LASER.inverse()
-    return fit
-
-
 def kidnap_and_turn(name, m, localizer, sim, pose) -> dict:
     sim.place(pose)
     result = localizer.localize(sim.scan(), base_T_laser=BASE_T_LASER)
@@ -50,15 +42,14 @@ def kidnap_and_turn(name, m, localizer, sim, pose) -> dict:
     if result.outcome != Outcome.AMBIGUOUS:
         return row
     matcher, c = localizer.matcher('bnb'), localizer.config.bnb
-    resolver = MotionResolver([h.pose for h in result.hypotheses], MotionConfig(lead=c.min_confidence *
-                                                                                (1.0 - c.keep_ratio)))
+    resolver = MotionResolver([h.pose for h in result.hypotheses], MotionConfig.for_matcher(c))
     winner, seen = None, []
     for k in range(int(2 * math.pi / TURN_RATE / TICK)):
         before = sim.odom
         sim.drive(0.0, TURN_RATE, TICK)
         points = scan_to_points(sim.scan())
         seen.append((sim.odom * BASE_T_LASER, points))
-        leader = resolver.update(before.inverse() * sim.odom, fitter(matcher, points))
+        leader = resolver.update(before.inverse() * sim.odom, pose_fitter(matcher, points, BASE_T_LASER))
         if leader is not None and k % int(1.0 / TICK) == 0:       # as the server: a check at most once a second
             winner = settle(localizer, seen, BASE_T_LASER, leader.pose)
             if winner is not None:
@@ -92,7 +83,7 @@ def watch(name, m, localizer, sim, minutes: float, rng) -> list[dict]:
         sim.drive(0.24, 0.24 / radius, TICK)
         t += TICK
         if k % int(HEALTH_PERIOD / TICK) == 0:
-            fit, _ = fitter(matcher, scan_to_points(sim.scan()))(sim.true_pose())
+            fit, _ = pose_fitter(matcher, scan_to_points(sim.scan()), BASE_T_LASER)(sim.true_pose())
             before = sup.health
             if sup.on_fit(t, fit) == Health.LOST and before != Health.LOST:
                 alarms += 1
@@ -106,7 +97,8 @@ def watch(name, m, localizer, sim, minutes: float, rng) -> list[dict]:
     while t - t0 < 30.0 and published is None:
         sim.drive(0.0, 0.0, TICK)
         t += TICK
-        fit, _ = fitter(matcher, scan_to_points(sim.scan()))(believed * (odom_then.inverse() * sim.odom))
+        believed_now = believed * (odom_then.inverse() * sim.odom)
+        fit, _ = pose_fitter(matcher, scan_to_points(sim.scan()), BASE_T_LASER)(believed_now)
         sup.on_fit(t, fit)
         if sup.should_relocalize(t):
             sup.started_relocalization(t)
@@ -124,9 +116,8 @@ def watch(name, m, localizer, sim, minutes: float, rng) -> list[dict]:
 
 def fit_row(source: str, matcher, m, points, truth_laser: Rigid2D, rng) -> dict:
     """The fit at the true laser pose and at a random free pose (the supervisor's thresholds)."""
-    def fit(laser):
-        score, through, _ = matcher.fit_at(points, laser)
-        return round(score * (1.0 - through), 4)
+    def fit(laser):      # the laser pose itself: a base with the laser at its origin
+        return round(pose_fitter(matcher, points, Rigid2D())(laser)[0], 4)
     return {'suite': 'relocalization', 'test': 'fit', 'source': source, 'true_fit': fit(truth_laser),
             'random_fit': fit(sample_free_poses(m, 1, rng)[0])}
 

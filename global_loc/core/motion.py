@@ -25,6 +25,18 @@ from .transform import Rigid2D, pose_correct
 FitFn = Callable[[Rigid2D], tuple[float, Rigid2D]]
 
 
+def pose_fitter(matcher, points: ScanPoints, base_T_laser: Rigid2D) -> FitFn:
+    """How well one scan fits at a robot pose, the one measure tracking and health use:
+    bnb's field score x (1 - share of beams through mapped walls), at the pose refined
+    within about a cell (fit_at); with the refined base pose."""
+    laser_T_base = base_T_laser.inverse()
+
+    def fit(base: Rigid2D) -> tuple[float, Rigid2D]:
+        score, through, laser = matcher.fit_at(points, base * base_T_laser)
+        return score * (1.0 - through), laser * laser_T_base
+    return fit
+
+
 @dataclass(frozen=True)
 class MotionConfig:
     lead: float = 0.05                   # a confident single-scan margin (bnb's) ...
@@ -32,6 +44,11 @@ class MotionConfig:
     min_travel_m: float = 0.5            # ... after the robot drove this far
     min_turn: float = math.radians(90)   # ... or turned this much
     keep: float = 0.8                    # hypotheses whose mean fit falls below keep x the best are dropped
+
+    @staticmethod
+    def for_matcher(options) -> 'MotionConfig':
+        """With the lead a confident single-scan answer of bnb (its options) needs."""
+        return MotionConfig(lead=options.min_confidence * (1.0 - options.keep_ratio))
 
 
 @dataclass

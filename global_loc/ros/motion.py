@@ -11,7 +11,7 @@ import time
 from geometry_msgs.msg import Twist, Vector3
 
 from ..core.localizer import Hypothesis, LocalizationResult
-from ..core.motion import MotionConfig, MotionResolver, settle
+from ..core.motion import MotionConfig, MotionResolver, pose_fitter, settle
 from ..core.scan import ScanError, scan_to_points
 from ..core.transform import Rigid2D
 from .convert import scan_from_msg, stamp_seconds
@@ -27,10 +27,7 @@ def resolve_by_motion(node, goal, result: LocalizationResult, first_scan, base_T
         return dataclasses.replace(result, message=f'{result.message} (no odometry on {node.settings.odom_topic}: '
                                                    f'cannot resolve by motion)'), first_scan
     matcher = node.localizer.matcher('bnb')
-    laser_T_base = base_T_laser.inverse()
-    c = matcher.options
-    resolver = MotionResolver([h.pose for h in result.hypotheses], MotionConfig(lead=c.min_confidence *
-                                                                                (1.0 - c.keep_ratio)))
+    resolver = MotionResolver([h.pose for h in result.hypotheses], MotionConfig.for_matcher(matcher.options))
     start = time.monotonic()
     deadline = start + goal.resolve_by_motion_s
     last_stamp, since = stamp_seconds(first_scan.header.stamp), start
@@ -56,12 +53,7 @@ def resolve_by_motion(node, goal, result: LocalizationResult, first_scan, base_T
             odom = node.odom_history.at(stamp)
             if odom is not None:
                 seen.append((odom * base_T_laser, points))
-
-            def fit(base_pose, points=points):
-                score, through, laser = matcher.fit_at(points, base_pose * base_T_laser)
-                return score * (1.0 - through), laser * laser_T_base
-
-            leader = resolver.update(motion, fit)
+            leader = resolver.update(motion, pose_fitter(matcher, points, base_T_laser))
             if leader is not None and time.monotonic() - checked >= 1.0:    # a search: at most once a second
                 checked = time.monotonic()
                 winner = settle(node.localizer, seen, base_T_laser, leader.pose)

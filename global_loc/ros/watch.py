@@ -15,6 +15,7 @@ from std_msgs.msg import String
 
 from global_loc_interfaces.action import Localize
 
+from ..core.motion import pose_fitter
 from ..core.outcome import Outcome
 from ..core.scan import ScanError, scan_to_points
 from ..core.supervisor import Health, Supervisor, SupervisorConfig
@@ -63,10 +64,10 @@ class LocalizationWatch:
         if pose is not None:
             try:
                 points = scan_to_points(scan_from_msg(msg))
-                score, through, _ = node.localizer.matcher('bnb').fit_at(
-                    points, pose * node.mounting.base_T_laser(msg.header.frame_id))
+                fit, _ = pose_fitter(node.localizer.matcher('bnb'), points,
+                                     node.mounting.base_T_laser(msg.header.frame_id))(pose)
                 with self.lock:
-                    self.supervisor.on_fit(now, score * (1.0 - through))
+                    self.supervisor.on_fit(now, fit)
             except ScanError:
                 pass
         self.publish()
