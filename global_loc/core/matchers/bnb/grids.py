@@ -10,7 +10,7 @@ from ...map_io import OccupancyMap
 from .kernels import FreeBlocks, Planes
 from .options import BranchAndBoundOptions
 
-MARGINS = (0, 1, 2, 3, 5, 9, 17, 33)   # widenings (cells) for which grids are kept
+MARGINS = (0, 1, 2, 3, 4, 6, 8, 12, 16, 24, 32)   # widenings (cells) for which grids are kept
 PLANE_SHIFT_FROM = 3                   # planes of level h > this are stored at 1 / 2^(h - this)
                                        # resolution (see PrecomputationGridStack)
 
@@ -40,8 +40,11 @@ class PrecomputationGridStack:
             raise ValueError(f'bnb levels must be 1 .. {most}, got {options.levels}')
         occupied = occupancy_map.occupied
         self.occupied = occupied.astype(np.uint8)     # for the free-space check
-        dist = occupancy_map.distance_to_occupied()
-        self.field = np.exp(-(dist.astype(np.float32) ** 2) / (2.0 * options.sigma_cells ** 2))
+        # exp(-d^2 / 2 sigma^2) in place: a 4000^2 map's float32 temporaries are 64 MB each
+        self.field = occupancy_map.distance_to_occupied().astype(np.float32, copy=False)
+        np.square(self.field, out=self.field)
+        self.field *= np.float32(-1.0 / (2.0 * options.sigma_cells ** 2))
+        np.exp(self.field, out=self.field)
         p = (2 ** top) + 2 * int(self.margin(top)) + 2
         shift = np.array([max(0, h - PLANE_SHIFT_FROM) for h in range(options.levels)], np.int64)
         unit = 2 ** int(shift.max())
@@ -49,23 +52,28 @@ class PrecomputationGridStack:
         height, width = (-(-(n + 2 * p) // unit) * unit for n in occupied.shape)
         base = np.zeros((height, width), np.uint8)
         base[p:p + occupied.shape[0], p:p + occupied.shape[1]] = np.rint(self.field * 255).astype(np.uint8)
+        # Level h reads widenings from margin(h, ~0) (1 cell of rounding for h > 0) up to
+        # margin(h): only those planes are kept.
         self.index: dict[tuple[int, int], int] = {}
         for h in range(options.levels):
             for m in MARGINS:
-                self.index[h, m] = len(self.index)
-                if m >= self.margin(h):
-                    break
-        planes, plane = [], np.empty_like(base)
-        for h, m in self.index:
+                if m >= self.margin(h, 1e-6):
+                    self.index[h, m] = len(self.index)
+                    if m >= self.margin(h):
+                        break
+        sizes = [(height >> int(shift[h])) * (width >> int(shift[h])) for h, _ in self.index]
+        self.offsets = np.cumsum([0] + sizes[:-1]).astype(np.int64)
+        flat = np.empty(sum(sizes), np.uint8)      # written plane by plane: no list to concatenate
+        plane = np.empty_like(base)
+        for (h, m), start, n in zip(self.index, self.offsets, sizes):
             k = 2 ** int(shift[h])
             # dilate's window at (x, y) spans [x - anchor, x - anchor + size): the block and m
             # around it, and the k - 1 cells after it that the stored cell (x, y) also stands for
             size = 2 ** h + 2 * m + k - 1
             cv2.dilate(base, np.ones((size, size), np.uint8), dst=plane, anchor=(m, m))
-            planes.append(plane[::k, ::k].flatten())     # a copy: plane is reused
-        self.offsets = np.cumsum([0] + [len(q) for q in planes[:-1]]).astype(np.int64)
-        self.planes = Planes(np.concatenate(planes), shift, np.array([width >> int(s) for s in shift], np.int64),
-                             p, width, height)
+            flat[start:start + n].reshape(height >> int(shift[h]), width >> int(shift[h]))[:] = plane[::k, ::k]
+        del plane, base
+        self.planes = Planes(flat, shift, np.array([width >> int(s) for s in shift], np.int64), p, width, height)
         # free_blocks: per level h, block (u >> h, v >> h) of the map holds a free cell
         free = occupancy_map.free
         free_offsets, free_width, blocks = [], [], []
@@ -88,17 +96,19 @@ class PrecomputationGridStack:
 
     @staticmethod
     def margin(level: int, range_fraction=1.0):
-        """Cells a point at range_fraction x r_max may move within a level-`level` node's
-        2^level angles (about the middle one), plus one of rounding. range_fraction may
-        be an array (one per point)."""
+        """Cells by which a point at range_fraction x r_max may land from where it lands at
+        the middle of a level-`level` node's 2^level angles: it moves at most d = (2^level
+        - 1) / 2 x range_fraction cells (a chord at r_max spans one cell per angle step),
+        and two values d apart round to cells at most ceil(d) apart (d + 1 only at exact
+        ties, which the 1e-3 covers). range_fraction may be an array (one per point)."""
         if level == 0:
             return np.zeros_like(range_fraction, dtype=int)
-        return np.ceil((2 ** level - 1) / 2.0 * np.asarray(range_fraction) + 1e-3).astype(int) + 1
+        return np.ceil((2 ** level - 1) / 2.0 * np.asarray(range_fraction) + 1e-3).astype(int)
 
     def grid_ids(self, ranges: np.ndarray, r_max: float) -> np.ndarray:
         """(levels, points): the grid each point reads at each level, the one widened
         just enough for the point's range."""
-        out = np.array([[self.index[h, 0]] * len(ranges) for h in range(self.options.levels)], np.int64)
+        out = np.full((self.options.levels, len(ranges)), self.index[0, 0], np.int64)
         for h in range(1, self.options.levels):
             need = self.margin(h, ranges / r_max)
             available = np.array([m for m in MARGINS if (h, m) in self.index])
