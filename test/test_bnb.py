@@ -60,11 +60,11 @@ def test_bounds_are_never_below_the_leaves_under_them():
     m = small_room()
     rng = np.random.default_rng(5)
     scan = simulate_scan(m, Rigid2D(1.0, 2.0, 0.3), 360.0, 360, 4.0, rng=rng)
-    matcher = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=4))
+    matcher = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=5))
     pts = matcher.prepare(scan_to_points(scan).points)
-    n = 512
+    n = 512     # a point at the scan's largest range moves just under a cell per angle step
     d0 = 2 * math.pi / n
-    for level in (1, 2, 3):
+    for level in (1, 2, 3, 4):
         size = 2 ** level
         tu, tv, ta = (rng.integers(0, 80 - size, 40) // size * size, rng.integers(0, 60 - size, 40) // size * size,
                       rng.integers(0, n - size, 40) // size * size)

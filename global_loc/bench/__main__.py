@@ -16,11 +16,13 @@ import subprocess
 import sys
 import time
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
 from .relocalization import relocalization_rows
-from .report import write_report
+from .report import BASELINE, write_report
+from .scaling import SIZES, scaling_rows
 from .suites import (
     ANGLE_STEP_METHODS,
     METHODS,
@@ -60,33 +62,11 @@ def machine_info() -> dict:
             'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}
 
 
-def precompute_cost(m, size: int = 2000) -> dict:
-    """bnb's per-map precomputation on a size x size map (tiles of `m`): time, the grids'
-    bytes, and how much the process's peak memory grew (the numba kernels are compiled
-    or loaded from cache first, so their one-time cost is not counted)."""
-    import resource
-
-    from ..core.map_io import from_occupancy_grid
-    from ..core.matchers.bnb import BranchAndBoundMatcher, warm_up
-    warm_up()
-    grid = np.where(m.occupied, 100, np.where(m.free, 0, -1))
-    reps = (size // grid.shape[0] + 1, size // grid.shape[1] + 1)
-    big = np.tile(grid, reps)[:size, :size]
-    big_map = from_occupancy_grid(size, size, m.resolution, (0.0, 0.0, 0.0), big[::-1].ravel())
-    peak0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    t = time.perf_counter()
-    matcher = BranchAndBoundMatcher(big_map)
-    seconds = time.perf_counter() - t
-    peak1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return {'map': f'{size} x {size} cells (tiles of a {m.width} x {m.height} map)', 'seconds': round(seconds, 2),
-            'grid_mb': round(matcher.stack.nbytes / 1e6), 'peak_rss_growth_mb': round((peak1 - peak0) / 1024)}
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog='python -m global_loc.bench', description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='few poses and maps: a few minutes')
-    parser.add_argument('--suites', default='cut,sim,carmen,prior,relocalization',
-                        help='comma-separated: cut, sim, carmen, prior, relocalization')
+    parser.add_argument('--suites', default='cut,sim,carmen,prior,relocalization,scaling',
+                        help='comma-separated: cut, sim, carmen, prior, relocalization, scaling')
     parser.add_argument('--methods', default=','.join(METHODS))
     parser.add_argument('--jobs', type=int, default=os.cpu_count() or 1, help='worker processes')
     parser.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'), help='shared/data folder')
@@ -123,8 +103,6 @@ def main(argv=None) -> int:
     if 'carmen' in suites:
         trials += carmen
         maps.update(carmen_maps)
-    if 'bnb' in methods:
-        notes['bnb_precompute'] = precompute_cost(maps.get('building_31') or maps['office'])
     jobs = [(i, t, m) for i, t in enumerate(trials) for m in methods
             if not (m not in ANGLE_STEP_METHODS and t.condition.get('angle_step', 5) != 5)
             and (t.suite != 'prior' or m in PRIOR_METHODS)]
@@ -142,8 +120,16 @@ def main(argv=None) -> int:
         world = {**{n: m for n, m in maps.items() if '/' not in n}, **symmetric_maps()}
         notes['relocalization'] = relocalization_rows(world, max(2, poses // 5), 1.0 if args.quick else 10.0,
                                                       args.seed, carmen, carmen_maps)
+    if 'scaling' in suites:
+        print('scaling suite (tiled maps, precomputation in fresh processes) ...', file=sys.stderr)
+        cv2.setNumThreads(threads)
+        building = maps.get('building_31') or maps['office']
+        real = {n: m for n, m in maps.items() if '/' not in n or n.endswith('/fold0')}
+        notes['scaling'] = scaling_rows(building, real, 3 if args.quick else max(5, poses // 4), args.seed,
+                                        [m for m in methods if m in ('bnb', BASELINE)],
+                                        SIZES[:3] if args.quick else SIZES)
     with open(os.path.join(out, 'rows.jsonl'), 'w') as f:
-        for row in rows + notes.get('relocalization', []):
+        for row in rows + notes.get('relocalization', []) + notes.get('scaling', []):
             f.write(json.dumps(row) + '\n')
     meta = {'machine': machine, 'command': 'python -m global_loc.bench ' + ' '.join(argv or sys.argv[1:]),
             'jobs': args.jobs, 'threads': threads, 'wall_time_s': round(time.time() - t0, 1), 'quick': args.quick,

@@ -132,11 +132,8 @@ def write_report(rows, meta, out, maps, trials) -> None:
         md += prior_section(by_suite['prior'], out)
     if meta.get('relocalization'):
         md += relocalization_section(meta['relocalization'])
-    pre = meta.get('bnb_precompute')
-    if pre:
-        md += ['## bnb precomputation (once per map)', '',
-               f'On a {pre["map"]}: {pre["seconds"]} s, grids {pre["grid_mb"]} MB, peak memory of the process '
-               f'+{pre["peak_rss_growth_mb"]} MB.', '']
+    if meta.get('scaling'):
+        md += scaling_section(meta['scaling'], rows, out)
     md += failure_pictures(rows, trials, maps, out)
     with open(os.path.join(out, 'REPORT.md'), 'w') as f:
         f.write('\n'.join(md) + '\n')
@@ -160,6 +157,64 @@ def prior_section(rows, out) -> list[str]:
                          f'| {pct(s["ok"])} | {pct(s["marked_wrong"])} | {secs(s["median"])} | {secs(s["p95"])} '
                          f'| {s["median"] / whole:.3f} |')
     return lines + ['']
+
+
+def scaling_section(rows, all_rows, out) -> list[str]:
+    """Time per localization and precomputation against free area: tiled maps and the run's real maps."""
+    pre = {r['map']: r for r in rows if r['kind'] == 'precompute'}
+    loc = group([r for r in rows if r['kind'] == 'localize'], lambda r: (r['map'], r['method']))
+    # the real maps' localizations come from the sim (270 deg / 20 m) and carmen suites of the same run
+    for r in all_rows:
+        if r['suite'] == 'sim' and r['fov'] == 270 and r['range'] == 20 and r['angle_step'] == 5 and not r['clutter']:
+            loc.setdefault((r['map'], r['method']), []).append(r)
+        elif r['suite'] == 'carmen':
+            loc.setdefault((r['map'].split('/')[0] + '/fold0', r['method']), []).append(r)
+    lines = ['## Scaling: map size, free area, time', '',
+             'building_31 (5 cm) cut to 500² cells and tiled to 1000², 2000², 4000², each tile with its own random '
+             'boxes; ray-cast 270° / 20 m scans at seeded free poses. Real maps: the run\'s shared maps (sim '
+             'suite, 270° / 20 m) and the CARMEN logs (all folds\' scans; precomputation of fold 0\'s map). '
+             f'Precomputation in a fresh process: seconds, the grids, and the peak memory\'s rise. {BASELINE} is '
+             'run until one localization takes a minute ("–": not run).', '',
+             '| map | cells | free area [m²] | precompute [s] | grids [MB] | memory [MB] | bnb n | bnb success '
+             '| bnb median [s] | bnb p95 [s] | baseline median [s] | baseline / bnb (median) |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|']
+    for name, p in pre.items():
+        b, t = loc.get((name, 'bnb'), []), loc.get((name, BASELINE), [])
+        sb, st = stats(b) if b else None, stats(t) if t else None
+        ratio = f'{st["median"] / sb["median"]:.0f}×' if sb and st else '–'
+        lines.append(f'| {name} | {p["cells"] / 1e6:.2f} M | {p["free_m2"]} | {p["precompute_s"]} | {p["grid_mb"]} '
+                     f'| {p["memory_mb"]} | {len(b)} | {pct(sb["ok"]) if sb else "–"} '
+                     f'| {secs(sb["median"]) if sb else "–"} | {secs(sb["p95"]) if sb else "–"} '
+                     f'| {secs(st["median"]) if st else "–"} | {ratio} |')
+    plot_scaling(pre, loc, out)
+    return lines + ['', '![scaling](scaling.png)', '']
+
+
+def plot_scaling(pre, loc, out):
+    fig, (ax_t, ax_p) = plt.subplots(1, 2, figsize=(11, 4))
+    tiled = [n for n in pre if n.endswith('^2')]
+    for names, marker, label in ((tiled, 'o-', 'tiled building'), ([n for n in pre if n not in tiled], 's', 'real')):
+        area = [pre[n]['free_m2'] for n in names]
+        for method, colour in (('bnb', 'C0'), (BASELINE, 'C3')):
+            have = [(a, stats(loc[n, method])) for a, n in zip(area, names, strict=True) if loc.get((n, method))]
+            if have:
+                xs = [a for a, _ in have]
+                ax_t.plot(xs, [s['median'] for _, s in have], marker, color=colour, label=f'{method} median ({label})')
+                if method == 'bnb':
+                    ax_t.plot(xs, [s['p95'] for _, s in have], marker, color=colour, alpha=0.4,
+                              label=f'bnb p95 ({label})')
+        ax_p.plot(area, [pre[n]['precompute_s'] for n in names], marker, color='C2', label=f'seconds ({label})')
+        ax_p.plot(area, [pre[n]['memory_mb'] / 100 for n in names], marker, color='C4',
+                  label=f'memory / 100 MB ({label})')
+    for ax, title in ((ax_t, 'time per localization [s]'), (ax_p, 'bnb precomputation')):
+        ax.set_xscale('log')
+        ax.set_yscale('log')
+        ax.set_xlabel('free area [m²]')
+        ax.set_title(title)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, 'scaling.png'), dpi=90)
+    plt.close(fig)
 
 
 def relocalization_section(rows) -> list[str]:

@@ -65,7 +65,7 @@ class PrecomputationGridStack:
         self.offsets = np.cumsum([0] + sizes[:-1]).astype(np.int64)
         flat = np.empty(sum(sizes), np.uint8)      # written plane by plane: no list to concatenate
         plane = np.empty_like(base)
-        for (h, m), start, n in zip(self.index, self.offsets, sizes):
+        for (h, m), start, n in zip(self.index, self.offsets, sizes, strict=True):
             k = 2 ** int(shift[h])
             # dilate's window at (x, y) spans [x - anchor, x - anchor + size): the block and m
             # around it, and the k - 1 cells after it that the stored cell (x, y) also stands for
