@@ -39,9 +39,25 @@ def json_line_scans(path: str):
                 obj = json.loads(line)
                 if not isinstance(obj, dict):
                     raise ScanError('expected a JSON object with LaserScan fields')
-                yield where, Scan.from_dict(obj), obj.get('truth')
+                yield where, Scan.from_dict(obj), parse_truth(obj.get('truth'))
             except (UnicodeDecodeError, json.JSONDecodeError, ScanError) as e:
                 yield where, ScanError(f'line {lineno}: {e}'), None
+
+
+def parse_truth(value) -> Rigid2D | None:
+    """A line's optional "truth": {"x": m, "y": m, "yaw": rad}, finite numbers; ScanError otherwise."""
+    if value is None:
+        return None
+    try:
+        if not isinstance(value, dict) or isinstance(value.get('x'), bool):
+            raise TypeError
+        x, y, yaw = (float(value[k]) for k in ('x', 'y', 'yaw'))
+    except (KeyError, TypeError, ValueError):
+        raise ScanError(f'"truth" must be {{"x": m, "y": m, "yaw": rad}} with numbers, got {json.dumps(value)[:80]}') \
+            from None
+    if not all(map(math.isfinite, (x, y, yaw))):
+        raise ScanError(f'"truth" must be finite, got {json.dumps(value)[:80]}')
+    return Rigid2D(x, y, yaw)
 
 
 def bag_scans(path: str, topic: str, every: int):
@@ -55,7 +71,7 @@ def localize_main(args) -> int:
     occupancy_map = load_map_yaml(args.map)
     bnb = BranchAndBoundOptions(**{name: getattr(args, f'bnb_{name}') for name, *_ in option_fields()})
     config = LocalizerConfig(method=args.method, angle_step_deg=args.angle_step, opening_kernel=args.opening_kernel,
-                             bnb=bnb)
+                             bnb=bnb, max_search_s=args.max_search_s)
     localizer = Localizer(occupancy_map, config)
     method = localizer.matcher(args.method).name   # unknown method: fail before reading any scan
     scans = bag_scans(args.bag, args.topic, args.every) if args.bag else json_line_scans(args.scans)
@@ -76,16 +92,15 @@ def localize_main(args) -> int:
                    time_s=round(result.time_s, 4), message=result.message,
                    hypotheses=[{**h.pose.as_dict(), 'score': round(h.score, 5)} for h in result.hypotheses])
         if truth is not None and result.pose is not None:
-            t = Rigid2D(truth['x'], truth['y'], truth['yaw'])
-            d, a = pose_error(result.pose, t)
-            out.update(truth=t.as_dict(), error_xy=round(d, 4), error_yaw_deg=round(a, 3))
+            d, a = pose_error(result.pose, truth)
+            out.update(truth=truth.as_dict(), error_xy=round(d, 4), error_yaw_deg=round(a, 3))
         print(json.dumps(out), flush=True)
         if args.plot:
             stem, ext = os.path.splitext(args.plot)
             path = args.plot if n == 1 else f'{stem}_{n:03d}{ext or ".png"}'
             from .plot import plot_localization
             plot_localization(path, occupancy_map, scan_to_points(scan).points, result.pose,
-                              Rigid2D(truth['x'], truth['y'], truth['yaw']) if truth else None,
+                              truth,
                               result.hypotheses, title=f'{method}: {result.message}')
     return 0
 
@@ -114,6 +129,8 @@ def build_parser() -> argparse.ArgumentParser:
     loc.add_argument('--every', type=int, default=1, help='with --bag: localize every N-th scan (default 1)')
     loc.add_argument('--method', default=LocalizerConfig.method, help=f'one of: {", ".join(method_names())}')
     loc.add_argument('--angle-step', type=float, default=LocalizerConfig.angle_step_deg, help='Δα, degrees')
+    loc.add_argument('--max-search-s', type=float, default=math.inf,
+                     help='seconds a search may take, then "search incomplete" (default: no limit)')
     loc.add_argument('--opening-kernel', type=int, default=LocalizerConfig.opening_kernel,
                      help='opening kernel of the local map, pixels (0 = off)')
     loc.add_argument('--plot', help='save a picture per scan (OUT.png, OUT_002.png, ...)')

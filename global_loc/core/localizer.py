@@ -15,9 +15,9 @@ import numpy as np
 
 from .map_io import OccupancyMap
 from .matchers import BranchAndBoundOptions, MatchOptions, make_matcher, resolve_method
-from .matchers.base import ProgressFn, distinct
+from .matchers.base import ProgressFn, Verdict, distinct
 from .outcome import Outcome
-from .scan import Scan, ScanPoints, scan_to_points
+from .scan import Scan, ScanPoints, require_shape, scan_to_points
 from .search_region import SearchRegion
 from .transform import Rigid2D, covariance_of_composition
 
@@ -43,6 +43,9 @@ class LocalizerConfig:
     covariance_yaw: float = 0.0685         # rad^2 ((15 deg)^2)
     base_T_laser: Rigid2D = field(default_factory=Rigid2D)   # laser mounting on the robot base
     bnb: BranchAndBoundOptions = field(default_factory=BranchAndBoundOptions)
+    # Seconds a search may take before it answers `search incomplete` with what it explored
+    # (the server sets a few seconds: a goal must end; the CLI and benchmark: no limit).
+    max_search_s: float = math.inf
 
 
 @dataclass
@@ -106,13 +109,23 @@ class Localizer:
         bounded = region is not None and region.bounded
         options = MatchOptions(angle_step_deg=check_angle_step(angle_step_deg or cfg.angle_step_deg),
                                opening_kernel=cfg.opening_kernel,
-                               region=region.for_laser(base_T_laser) if bounded else None)
-        found = matcher.match(points, options, progress)
-        candidates = [c for c in found.candidates if region.contains(c.laser_pose * laser_T_base)] if bounded \
-            else found.candidates
+                               region=region.for_laser(base_T_laser) if bounded else None,
+                               max_search_s=cfg.max_search_s)
+        if not self.map.occupied.any():
+            return LocalizationResult(Outcome.NO_MATCH, f'the map {self.map.source} has no obstacles (no occupied '
+                                                        f'cell) to match a scan against', matcher.name,
+                                      time_s=time.perf_counter() - t0, dropped=points.dropped)
+        found = matcher.match(require_shape(points), options, progress)
+        # never a non-finite pose or score, whatever a matcher made of a degenerate input
+        candidates = [c for c in found.candidates if all(map(math.isfinite, (*c.laser_pose.as_tuple(), c.score)))]
+        if bounded:
+            candidates = [c for c in candidates if region.contains(c.laser_pose * laser_T_base)]
         best = distinct(candidates, cfg.num_hypotheses, cfg.hypothesis_min_distance,
                         math.radians(cfg.hypothesis_min_angle_deg))
         verdict = matcher.judge(best, found.stats)
+        if verdict.outcome == Outcome.LOCALIZED and not verdict.confidence > 0:    # any matcher, any options
+            verdict = Verdict(Outcome.AMBIGUOUS, 0.0, 'ambiguous: confidence 0 (the best place ties with another); '
+                                                      'see the hypotheses')
         hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in best]
         result = LocalizationResult(verdict.outcome, verdict.message, matcher.name, confidence=verdict.confidence,
                                     hypotheses=hyps, time_s=time.perf_counter() - t0, dropped=points.dropped,

@@ -106,9 +106,22 @@ def from_occupancy_grid(width, height, resolution, origin, data, source='<Occupa
     grid = grid.astype(np.int16).reshape(height, width)
     if grid.min() < -1 or grid.max() > 100:
         raise MapError(f'{source}: cell values must lie in -1..100')
-    if not isinstance(origin, Rigid2D):
-        origin = Rigid2D(*[float(v) for v in origin])
+    try:
+        origin = origin.as_tuple() if isinstance(origin, Rigid2D) else tuple(float(v) for v in origin)
+    except (TypeError, ValueError) as e:
+        raise MapError(f'{source}: bad origin: {e}') from None
+    if len(origin) != 3:
+        raise MapError(f'{source}: origin must be (x, y, yaw), got {origin}')
+    origin = Rigid2D(*check_origin(origin, source))
     return make_map(np.flipud(grid).astype(np.int8), resolution, origin, source)
+
+
+def check_origin(origin, source: str):
+    """The map origin (x, y, yaw) if every value is finite; MapError otherwise (a NaN origin
+    would put every pose the matchers return at NaN)."""
+    if not all(math.isfinite(v) for v in origin):
+        raise MapError(f'{source}: origin must be finite numbers (x, y, yaw), got {list(origin)}')
+    return origin
 
 
 def _require(doc, key, path):
@@ -141,13 +154,16 @@ def load_map_yaml(path) -> OccupancyMap:
         negate = int(doc.get('negate', 0))
         occ_th = float(_require(doc, 'occupied_thresh', path))
         free_th = float(_require(doc, 'free_thresh', path))
+    except MapError:
+        raise
     except (TypeError, ValueError) as e:
         raise MapError(f'{path}: bad value: {e}') from None
     mode = doc.get('mode', 'trinary')
     if not math.isfinite(resolution) or resolution <= 0:
         raise MapError(f'{path}: resolution must be a positive number, got {resolution}')
-    if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
+    if len(origin) != 3:
         raise MapError(f'{path}: origin must be [x, y, yaw], got {doc["origin"]}')
+    check_origin(origin, path)
     if not (0.0 <= free_th < occ_th <= 1.0):
         raise MapError(f'{path}: need 0 <= free_thresh < occupied_thresh <= 1, '
                        f'got free_thresh={free_th}, occupied_thresh={occ_th}')
@@ -158,6 +174,8 @@ def load_map_yaml(path) -> OccupancyMap:
 
     image_path = image_name if os.path.isabs(image_name) else \
         os.path.join(os.path.dirname(os.path.abspath(path)), image_name)
+    if os.path.isdir(image_path):
+        raise MapError(f'{path}: image {image_path} is a directory, not an image file')
     if not os.path.isfile(image_path):
         raise MapError(f'{path}: image {image_path} not found')
     image = cv2.imread(image_path, cv2.IMREAD_UNCHANGED)

@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+MIN_POINT_SEPARATION_M = 0.01     # points closer than this count as one (a 1 cm grid)
+
 
 class ScanError(ValueError):
     """A scan cannot be used (malformed fields, or no valid reading at all)."""
@@ -93,6 +95,16 @@ def scan_to_points(scan: Scan) -> ScanPoints:
     # -inf is "too close to measure" (REP 117), NaN unknown: neither says the beam's path is free.
     no_return = (inf & (ranges > 0)) | high
     return ScanPoints(pts, float(scan.range_max), int(ranges.size), dropped, angles[no_return])
+
+
+def require_shape(points: ScanPoints) -> ScanPoints:
+    """ScanError unless the points hold at least 3 distinct places (1 cm apart): fewer
+    have no shape to match, and every pose would fit them equally well."""
+    distinct_points = len(np.unique(np.round(points.points / MIN_POINT_SEPARATION_M), axis=0))
+    if distinct_points < 3:
+        raise ScanError(f'scan has {distinct_points} distinct point(s) ({len(points.points)} valid readings): at '
+                        f'least 3 are needed to match a shape')
+    return points
 
 
 def polar_to_points(ranges: np.ndarray, angles: np.ndarray) -> np.ndarray:

@@ -53,6 +53,30 @@ def parse_args(argv):
     return parser.parse_args(argv)
 
 
+SERVER_GONE_S = 3.0    # the action server absent from the ROS graph this long: it is gone
+
+
+def wait_while_served(node, client: ActionClient, future, limit_s: float = math.inf) -> bool:
+    """Spin until `future` is done or `limit_s` passed; False when the server left the
+    ROS graph meanwhile (it died: no result will come)."""
+    deadline = time.monotonic() + limit_s
+    absent_since = None
+    while not future.done() and time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.05)
+        if client.server_is_ready():
+            absent_since = None
+        elif absent_since is None:
+            absent_since = time.monotonic()
+        elif time.monotonic() - absent_since > SERVER_GONE_S:
+            return False
+    return True
+
+
+def server_gone() -> int:
+    print('error: the global_loc server disappeared before answering (crashed or stopped); no result', file=sys.stderr)
+    return 2
+
+
 def run(node, args) -> int:
     client = ActionClient(node, Localize, args.action)
     if not client.wait_for_server(timeout_sec=args.server_timeout):
@@ -83,14 +107,15 @@ def run(node, args) -> int:
         return 1
     result_future = handle.get_result_async()
     if args.cancel_after > 0:
-        deadline = time.monotonic() + args.cancel_after
-        while not result_future.done() and time.monotonic() < deadline:
-            rclpy.spin_once(node, timeout_sec=0.05)
+        if not wait_while_served(node, client, result_future, args.cancel_after):
+            return server_gone()
         if not result_future.done():
             if not args.json:
                 print(f'canceling after {args.cancel_after:.1f} s', flush=True)
-            rclpy.spin_until_future_complete(node, handle.cancel_goal_async())
-    rclpy.spin_until_future_complete(node, result_future)
+            if not wait_while_served(node, client, handle.cancel_goal_async()):
+                return server_gone()
+    if not wait_while_served(node, client, result_future):
+        return server_gone()
     response = result_future.result()
     result = response.result
     status = STATUS.get(response.status, str(response.status))

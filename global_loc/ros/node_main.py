@@ -4,10 +4,13 @@ from __future__ import annotations
 import faulthandler
 import signal
 import sys
+import threading
+import time
 from typing import Callable, Optional
 
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
 
 
 def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]] = None,
@@ -16,21 +19,25 @@ def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]
     `startup_errors` (e.g. a map that cannot be loaded) is printed as one line and exits 1."""
     # `kill -USR1` prints every thread's stack: how a node that does not stop is diagnosed.
     faulthandler.register(signal.SIGUSR1, all_threads=True)
-    # rclpy's own SIGTERM handler shuts the context down and wakes the executor, but in
-    # fresh-clone CI a server has stayed in its wait 10 s after a SIGTERM (three times so
-    # far; the SIGUSR1 trace shows the main thread in wait_set.wait). rclpy chains to
-    # the handler installed before init, and the spin below returns to Python twice a
-    # second, so this one ends the node either way.
-    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
-    rclpy.init(args=args)
+    # SIGINT and SIGTERM are handled here, not by rclpy: rclpy's handler shuts the context
+    # down at once, so a running goal could no longer publish its feedback nor send its
+    # result. Here a signal while spinning only asks the loop to stop; the node then winds
+    # down (ends its goals, their results are sent) while the executor still spins, and
+    # only then is the context shut down. A signal while the node is being built (a long
+    # map precomputation) interrupts it.
+    stop = _StopRequest()
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = executor = None
     code = 0
     try:
         node = make_node()
         executor = make_executor() if make_executor else SingleThreadedExecutor()
         executor.add_node(node)
-        while rclpy.ok():
-            executor.spin_once(timeout_sec=0.5)
+        stop.spinning = True
+        while rclpy.ok() and not stop.requested.is_set():
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except startup_errors as e:
@@ -39,14 +46,13 @@ def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]
     except Exception:
         if rclpy.ok():
             raise
-        # SIGINT/SIGTERM shut the context down under a running callback or the constructor
-        # (its publish then fails): that is the requested stop, not a crash.
     finally:
-        stop = getattr(node, 'stop_work', None)
-        if stop:
-            stop()        # end running work (a goal) first, so the executor's threads can be joined
+        stop.spinning = True      # from here on a further signal is ignored: the stop is under way
+        wind_down = getattr(node, 'wind_down', None)
+        if wind_down is not None and executor is not None and rclpy.ok():
+            _spin_while_winding_down(executor, wind_down())
         if executor is not None:
-            executor.shutdown(timeout_sec=5.0)   # join the executor's worker threads
+            executor.shutdown(timeout_sec=1.0)
         if node is not None:
             close = getattr(node, 'close', None)
             if close:
@@ -57,5 +63,29 @@ def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]
     return code
 
 
-def _raise_keyboard_interrupt(signum, frame):
-    raise KeyboardInterrupt(f'signal {signum}')
+class _StopRequest:
+    """The SIGINT/SIGTERM handler: sets `requested`; raises KeyboardInterrupt only while
+    the node is being built (nothing spins yet to notice the flag)."""
+
+    def __init__(self):
+        self.requested = threading.Event()
+        self.spinning = False
+
+    def __call__(self, signum, frame):
+        first = not self.requested.is_set()
+        self.requested.set()
+        if first and not self.spinning:
+            raise KeyboardInterrupt(f'signal {signum}')
+
+
+def _spin_while_winding_down(executor: Executor, idle: Callable[[], bool], limit_s: float = 0.8,
+                             flush_s: float = 0.1) -> None:
+    """Spin until `idle()` (the node's running work has ended) or `limit_s`, then `flush_s`
+    more: an action's result is sent by a task the executor runs after the goal's callback
+    returned."""
+    deadline = time.monotonic() + limit_s
+    while not idle() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.02)
+    deadline = time.monotonic() + flush_s
+    while time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.02)

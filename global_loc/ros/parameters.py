@@ -95,5 +95,7 @@ def declare_server_parameters(node: Node) -> tuple[ServerSettings, LocalizerConf
         base_T_laser=Rigid2D(param('laser_x', 0.0, 'laser position on the base, m (used without tf2)'),
                              param('laser_y', 0.0, 'laser position on the base, m (used without tf2)'),
                              param('laser_yaw', 0.0, 'laser heading on the base, rad (used without tf2)')),
+        max_search_s=param('max_search_s', 5.0, 'seconds a search may take; then the goal ends "search '
+                           'incomplete" with what was explored (a goal always ends)', **_float_range(0.01, 1e6)),
         bnb=bnb)
     return settings, config, supervisor

@@ -20,6 +20,7 @@ health is watched, and with `auto_relocalize` restored without a request (ros/wa
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import sys
 import threading
@@ -70,6 +71,11 @@ from .watch import LocalizationWatch
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
+def seconds(value: float) -> str:
+    """A duration for a log line: 1.0, 12.5, 1e+308 (not 309 digits)."""
+    return f'{value:.1f}' if value < 1e6 else f'{value:.3g}'
+
+
 class GlobalLocServer(LifecycleNode):
     def __init__(self):
         super().__init__('global_loc_server')
@@ -80,6 +86,7 @@ class GlobalLocServer(LifecycleNode):
         self.active = False
         self.stopping = threading.Event()     # set: running work ends (deactivate, cleanup, shutdown)
         self.busy = threading.Lock()
+        self._in_flight, self._in_flight_lock = 0, threading.Lock()
         self.scans: ScanWaiter[LaserScan] = ScanWaiter()
         self.odom: ScanWaiter[Odometry] = ScanWaiter()        # the newest odometry (has any come?)
         self.odom_history = PoseHistory()                      # odometry by stamp
@@ -212,8 +219,31 @@ class GlobalLocServer(LifecycleNode):
         self.get_logger().info('cancel requested')
         return CancelResponse.ACCEPT
 
+    @contextlib.contextmanager
+    def in_flight(self):
+        """Counts a request (goal or service call) until its handler returns (wind_down waits for none)."""
+        with self._in_flight_lock:
+            self._in_flight += 1
+        try:
+            yield
+        finally:
+            with self._in_flight_lock:
+                self._in_flight -= 1
+
+    def wind_down(self):
+        """run_node's first step on SIGINT/SIGTERM, while the executor still spins: stop
+        accepting work and end what runs (a goal ends canceled, "the server is stopping");
+        returns whether it is all over."""
+        self.active = False
+        self.stopping.set()
+        return lambda: self._in_flight == 0
+
     def execute(self, goal_handle):
         """The action: serve the goal, then end it as its outcome says."""
+        with self.in_flight():
+            return self._execute(goal_handle)
+
+    def _execute(self, goal_handle):
         result = self.serve(goal_handle.request, lambda: goal_handle.is_cancel_requested,
                             lambda progress, stage, best, hypotheses=0: goal_handle.publish_feedback(
                                 Localize.Feedback(progress=float(progress), stage=stage, hypotheses=int(hypotheses),
@@ -228,7 +258,8 @@ class GlobalLocServer(LifecycleNode):
 
     def on_trigger(self, request, response):
         """std_srvs/Trigger: localize the next scan with the defaults; the outcome in one line."""
-        result = self.serve(Localize.Goal(publish_initialpose=True))
+        with self.in_flight():
+            result = self.serve(Localize.Goal(publish_initialpose=True))
         response.success = bool(result.success)
         response.message = f'{Outcome(result.outcome).label}: {result.message}'
         if len(result.hypotheses.poses):
@@ -239,7 +270,8 @@ class GlobalLocServer(LifecycleNode):
 
     def on_reinitialize(self, request, response):
         """std_srvs/Empty (nav2's ReinitializeGlobalLocalization): the same as ~/trigger."""
-        self.serve(Localize.Goal(publish_initialpose=True))
+        with self.in_flight():
+            self.serve(Localize.Goal(publish_initialpose=True))
         return response
 
     def serve(self, goal, cancelled=lambda: False, feedback=lambda *args: None) -> Localize.Result:
@@ -281,11 +313,11 @@ class GlobalLocServer(LifecycleNode):
             return self.refuse(Outcome.BAD_GOAL, str(e))
         timeout = goal.timeout_s if goal.timeout_s > 0 else self.settings.scan_timeout_s
         topic = self.settings.scan_topic
-        self.get_logger().info(f'localizing: method {method}, waiting up to {timeout:.1f} s for a scan on {topic}')
+        self.get_logger().info(f'localizing: method {method}, waiting up to {seconds(timeout)} s for a scan on {topic}')
         feedback(0.0, 'waiting_for_scan', 0.0)
         msg = self.scans.wait_after(start, timeout, cancelled)
         if msg is None:
-            return self.refuse(Outcome.NO_SCAN, f'no scan on {topic} within {timeout:.1f} s')
+            return self.refuse(Outcome.NO_SCAN, f'no scan on {topic} within {seconds(timeout)} s')
         feedback(0.05, 'preparing_scan', 0.0)   # local map or points, per method
         self.get_logger().info(f'matching a scan of {len(msg.ranges)} beams')
         last = [0.0]

@@ -5,7 +5,7 @@ from typing import Optional
 
 from .base import Candidate, Match, Matcher, MatchOptions, MethodError
 from .bnb import BranchAndBoundMatcher, BranchAndBoundOptions
-from .features import FeatureMatcher, surf_available
+from .features import FeatureMatcher, make_detector, surf_available
 from .template import ccoeff_matcher, sqdiff_matcher
 
 _FACTORIES = {
@@ -31,6 +31,8 @@ def resolve_method(name: str) -> str:
         return ALIASES[name]()
     if name not in _FACTORIES:
         raise MethodError(f'unknown method {name!r}; known: {", ".join(method_names())}')
+    if name.startswith('features_'):
+        make_detector(name.split('_', 1)[1])     # MethodError when this OpenCV build lacks it (SURF, AKAZE)
     return name
 
 

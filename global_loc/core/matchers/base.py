@@ -10,6 +10,7 @@ nothing else, so one matcher serves any number of threads and callers.
 """
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, Callable, Optional
@@ -81,29 +82,52 @@ class MatchOptions:
     # Where the laser may be; a matcher may use it to search less (the Localizer drops
     # candidates outside the robot's region in any case).
     region: Optional[SearchRegion] = None
+    # Seconds of search after which a matcher stops and answers with what it explored
+    # (then never a success: a better place may lie in what it did not reach).
+    max_search_s: float = math.inf
+
+
+@dataclass(frozen=True)
+class Stopped:
+    """A thesis matcher's statistics when it stopped early (its time limit)."""
+    reason: str
 
 
 class Matcher(ABC):
     name: str = ''
     # Score at or above which a best candidate counts as a match, on this matcher's scale.
     min_score: float = 0.0
+    # Lead over the next distinct place, relative to the best, a success needs: any real
+    # lead (1%), not a tie. bnb's verdict has its own rule (verdict.py).
+    min_confidence: float = 0.01
 
     def __init__(self, occupancy_map: OccupancyMap):
         self.map = occupancy_map
 
     def judge(self, candidates: list[Candidate], stats: Any = None) -> Verdict:
         """The verdict on the distinct hypotheses, best first. The thesis matchers:
-        localized when the best score is at least min_score; confidence = how far the
-        best stands above the next, relative to it."""
+        confidence = how far the best stands above the next, relative to it; localized
+        when the best score is at least min_score *and* the confidence at least
+        min_confidence (a best tied with the next - confidence 0, as a scan of one
+        point gives - is never a success)."""
+        if isinstance(stats, Stopped):
+            return Verdict(Outcome.SEARCH_INCOMPLETE, 0.0, f'search incomplete: {stats.reason}; best of what was '
+                                                           f'explored, see the hypotheses')
         scores = [c.score for c in candidates]
         if not scores:
             return Verdict(Outcome.NO_MATCH, 0.0, f'{self.name} found no match')
         best = scores[0]
         conf = 1.0 if len(scores) == 1 else float(np.clip((best - scores[1]) / best, 0.0, 1.0)) if best > 0 else 0.0
-        if best >= self.min_score:
-            return Verdict(Outcome.LOCALIZED, conf, 'localized')
-        return Verdict(Outcome.POOR_MATCH, conf,
-                       f'best score {best:.3f} is below {self.name}\'s minimum {self.min_score}')
+        if not math.isfinite(conf):
+            conf = 0.0
+        if best < self.min_score:
+            return Verdict(Outcome.POOR_MATCH, conf,
+                           f'best score {best:.3f} is below {self.name}\'s minimum {self.min_score}')
+        if conf < self.min_confidence:
+            return Verdict(Outcome.AMBIGUOUS, conf, f'ambiguous: the next place scores within {100 * conf:.1f}% of '
+                                                    f'the best ({self.name} needs {100 * self.min_confidence:.0f}%); '
+                                                    f'see the hypotheses')
+        return Verdict(Outcome.LOCALIZED, conf, 'localized')
 
     @abstractmethod
     def match(self, points: ScanPoints, options: MatchOptions, progress: Optional[ProgressFn] = None) -> Match:

@@ -7,6 +7,9 @@ better, reported here as 1 - value so that every matcher's higher score is bette
 from __future__ import annotations
 
 import math
+import threading
+import time
+from functools import partial
 
 import cv2
 import numpy as np
@@ -14,7 +17,7 @@ import numpy as np
 from ..local_grid import build_local_grid, soften
 from ..pose import pose_from_match, rotation_px, translation_px
 from ..transform import normalize_angle
-from .base import Candidate, Match, Matcher
+from .base import Candidate, Match, Matcher, Stopped
 
 
 class RotatedTemplateMatcher(Matcher):
@@ -37,14 +40,21 @@ class RotatedTemplateMatcher(Matcher):
         angles = self.angles(options)
         laser = np.array([*local.laser_px, 1.0])
         candidates, best = [], -np.inf
+        deadline = time.monotonic() + options.max_search_s
+        stopped = None
         for i, angle in enumerate(angles):
+            if time.monotonic() > deadline:
+                stopped = Stopped(f'{options.max_search_s:g} s search limit reached after {i} of {len(angles)} '
+                                  f'rotations')
+                break
             templ, local_to_templ = rotate_tight(local.image, angle)
             templ = self.blur(templ)
             window, (ox, oy) = self.search_window(templ.shape, (local_to_templ @ laser)[:2], options.region)
             if window.size == 0:     # the prior's disc lies off the map
                 continue
             image, pad = pad_to_fit(window, templ.shape)
-            scores = cv2.matchTemplate(image, templ, self.cv_method)
+            scores = run_checked(partial(cv2.matchTemplate, image, templ, self.cv_method),
+                                 partial(progress, i / len(angles), float(best)) if progress else None)
             if self.cv_method in (cv2.TM_SQDIFF, cv2.TM_SQDIFF_NORMED):
                 scores = 1.0 - scores
             scores = np.nan_to_num(scores, nan=-1.0, posinf=-1.0, neginf=-1.0)
@@ -55,7 +65,7 @@ class RotatedTemplateMatcher(Matcher):
             if progress:
                 progress((i + 1) / len(angles), float(best))
         candidates.sort(key=lambda c: -c.score)
-        return Match(candidates)
+        return Match(candidates, stopped)
 
     def angles(self, options) -> np.ndarray:
         """The template's rotations (deg): every angle step over 360 deg, or those within
@@ -81,6 +91,35 @@ class RotatedTemplateMatcher(Matcher):
         x1 = int(np.clip(np.ceil(uc + reach - laser_in_templ[0]) + tw, x0, w))
         y1 = int(np.clip(np.ceil(vc + reach - laser_in_templ[1]) + th, y0, h))
         return self.map_image[y0:y1, x0:x1], (x0, y0)
+
+
+def run_checked(work, check, poll_s: float = 0.02):
+    """work() in a thread (OpenCV releases the GIL), calling check() every poll_s
+    meanwhile: check may raise (Cancelled) and the caller returns at once, leaving the
+    thread to finish alone. One rotation's matchTemplate on a 4000^2 map takes over a
+    second; a cancel must not wait for it. Not a daemon thread: the interpreter's exit
+    waits for it (C++ code still running at exit aborts the process). Without a check,
+    work() runs here."""
+    if check is None:
+        return work()
+    box = {}
+
+    def run():
+        try:
+            box['value'] = work()
+        except BaseException as e:     # re-raised in the caller's thread
+            box['error'] = e
+
+    thread = threading.Thread(target=run, name='matchTemplate')
+    thread.start()
+    while True:
+        thread.join(poll_s)
+        if not thread.is_alive():
+            break
+        check()
+    if 'error' in box:
+        raise box['error']
+    return box['value']
 
 
 def rotate_tight(image: np.ndarray, angle_deg: float):

@@ -19,6 +19,7 @@ margin behind the confidence. The laser must stand on a free cell of the map.
 from __future__ import annotations
 
 import math
+import time
 from typing import Optional
 
 import numpy as np
@@ -52,7 +53,7 @@ class BranchAndBoundMatcher(Matcher):
     min_score = 0.0
 
     def __init__(self, occupancy_map: OccupancyMap, options: Optional[BranchAndBoundOptions] = None,
-                 slice_expansions: int = 20000):
+                 slice_expansions: int = 5000):
         super().__init__(occupancy_map)
         self.options = options or BranchAndBoundOptions()
         self.stack = PrecomputationGridStack(occupancy_map, self.options)
@@ -98,6 +99,7 @@ class BranchAndBoundMatcher(Matcher):
 
     def match(self, points: ScanPoints, options: MatchOptions, progress: Optional[ProgressFn] = None) -> Match:
         opt = self.options
+        deadline = time.monotonic() + options.max_search_s
         pts = self.prepare(points.points)
         if len(pts) < 3:
             return Match([])
@@ -121,11 +123,15 @@ class BranchAndBoundMatcher(Matcher):
         bounds = node_bounds(self.stack.planes, tables, tu, tv, ta, top)
         leaves, per_level, exact = self.searcher.run(
             self.stack.planes, tables, self.stack.free, space,
-            np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, opt.max_nodes, progress)
+            np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, opt.max_nodes, progress, deadline)
         scores = leaves[:, 3] / (255.0 * len(pts))
+        expansions = int(per_level.sum())
+        stopped = '' if exact else (f'stopped after {expansions} node expansions' if expansions >= opt.max_nodes
+                                    else f'stopped at the {options.max_search_s:g} s search limit')
         stats = SearchStats(exact=exact, angles=n_angles, points=len(pts), leaves=len(scores),
-                            expansions=int(per_level.sum()), per_level=tuple(per_level.tolist()), top_nodes=len(tu),
-                            threads=search_threads(), best_leaf=float(scores.max()) if len(scores) else 0.0)
+                            expansions=expansions, per_level=tuple(per_level.tolist()), top_nodes=len(tu),
+                            threads=search_threads(), best_leaf=float(scores.max()) if len(scores) else 0.0,
+                            stopped=stopped)
         # 3. Peaks, refined, checked for free space, ranked.
         candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], scores, pts, d0, points)
         if progress:

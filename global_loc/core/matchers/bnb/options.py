@@ -27,7 +27,14 @@ class BranchAndBoundOptions:
                                                         'are one peak')
     see_through_tolerance_cells: float = _option(3.0, "a return's beam is checked for walls up to this many "
                                                       'cells short of its end (noise, grazing beams)')
-    min_confidence: float = _option(0.5, 'confidence (see the verdict) a result needs to be a success')
+    min_confidence: float = _option(0.5, 'confidence (see the verdict) a result needs to be a success, in (0, 1]')
+
+    def __post_init__(self):
+        # a confidence of 0 is a tie with another place: never a success
+        if not 0 < self.min_confidence <= 1:
+            raise ValueError(f'bnb min_confidence must be in (0, 1], got {self.min_confidence}')
+        if not 0 < self.keep_ratio < 1:
+            raise ValueError(f'bnb keep_ratio must be in (0, 1), got {self.keep_ratio}')
 
 
 def option_fields():

@@ -10,7 +10,9 @@ order, and the leaves are put in pose order before anyone picks peaks from them.
 """
 from __future__ import annotations
 
+import math
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Optional
@@ -34,6 +36,7 @@ class SearchStats:
     top_nodes: int
     threads: int
     best_leaf: float       # the best leaf's score, in [0, 1]
+    stopped: str = ''      # why a search that is not exact stopped (its budget of nodes or of time)
 
 
 def search_threads() -> int:
@@ -48,7 +51,7 @@ class ThreadedSearch:
     search costs time and, with glibc's per-thread arenas, memory); keeps no state of a
     search, so concurrent searches on one matcher are independent."""
 
-    def __init__(self, slice_expansions: int = 20000):
+    def __init__(self, slice_expansions: int = 5000):
         self.slice_expansions = slice_expansions
         self._lock = threading.Lock()
         self._pool: Optional[ThreadPoolExecutor] = None
@@ -61,11 +64,13 @@ class ThreadedSearch:
             return self._pool
 
     def run(self, planes: Planes, tables: ScanTables, free: FreeBlocks, space: SearchSpace, top_nodes: np.ndarray,
-            top_level: int, max_nodes: int, progress: Optional[ProgressFn]) -> tuple[np.ndarray, np.ndarray, bool]:
+            top_level: int, max_nodes: int, progress: Optional[ProgressFn],
+            deadline: float = math.inf) -> tuple[np.ndarray, np.ndarray, bool]:
         """Expand every node whose bound reaches space.keep x the best leaf, from the top
         nodes (rows u, v, a, bound). Returns the leaves scoring that high (rows u, v,
         angle index, raw score) in pose order, the expansions per level, and whether the
-        search was exhaustive (False when max_nodes stopped it)."""
+        search was exhaustive (False when max_nodes or the deadline (time.monotonic())
+        stopped it)."""
         threads = search_threads()
         order = np.argsort(-top_nodes[:, 3], kind='stable')     # deal the best nodes evenly
         heaps = [make_heap(top_nodes[order[k::threads]], top_level) for k in range(threads)]
@@ -78,7 +83,7 @@ class ThreadedSearch:
                                                        per_level[k])
             return n, leaves
 
-        while True:
+        while time.monotonic() <= deadline:
             budget = max(1, min(self.slice_expansions, max_nodes - expanded) // threads)
             if threads == 1:
                 results = [run(0, budget)]
@@ -86,7 +91,7 @@ class ThreadedSearch:
                 results = list(self._executor(threads).map(run, range(threads), [budget] * threads))
             expanded += sum(n for n, _ in results)
             found.extend(leaves for _, leaves in results)
-            if all(done) or expanded >= max_nodes:
+            if all(done) or expanded >= max_nodes or time.monotonic() > deadline:
                 break
             for k in range(threads):      # an idle thread takes half of the fullest heap
                 if done[k]:
@@ -96,7 +101,7 @@ class ThreadedSearch:
                         done[k] = done[j] = False
             if progress:   # the server's progress callback raises Cancelled on a cancel request
                 progress(min(0.95, expanded / max_nodes), shared_best[0] / (255.0 * tables.du.shape[1]))
-        leaves = np.concatenate(found)
+        leaves = np.concatenate(found) if found else np.empty((0, 4), np.int64)
         leaves = leaves[leaves[:, 3] >= space.keep * shared_best[0]]
         # in pose order, not the order the threads found them: equal scores then pick the
         # same peaks whatever the threads

@@ -27,8 +27,9 @@ def judge(candidates: list[Candidate], stats: Optional[SearchStats], options: Br
     place may lie in what it did not explore."""
     opt = options
     if stats is not None and not stats.exact:
-        return Verdict(Outcome.SEARCH_INCOMPLETE, 0.0, f'search incomplete: stopped after {opt.max_nodes} node '
-                                                       f'expansions; best of what was explored, see the hypotheses')
+        reason = stats.stopped or f'stopped after {opt.max_nodes} node expansions'
+        return Verdict(Outcome.SEARCH_INCOMPLETE, 0.0, f'search incomplete: {reason}; best of what was explored, '
+                                                       f'see the hypotheses')
     if not candidates:
         return Verdict(Outcome.NO_MATCH, 0.0, 'bnb found no pose on free space')
     best, others = candidates[0], candidates[1:]
