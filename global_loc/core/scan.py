@@ -78,7 +78,11 @@ def scan_to_points(scan: Scan) -> ScanPoints:
     ranges = np.asarray(scan.ranges, dtype=float).ravel()
     if ranges.size == 0:
         raise ScanError('scan has no readings')
-    angles = scan.angles()
+    with np.errstate(over='ignore', invalid='ignore'):
+        angles = scan.angles()
+    if not np.isfinite(angles).all():
+        raise ScanError(f'beam angles overflow: angle_min {scan.angle_min} + i x angle_increment '
+                        f'{scan.angle_increment} is not finite for every beam')
     nan = np.isnan(ranges)
     inf = np.isinf(ranges)
     finite = ~(nan | inf)
