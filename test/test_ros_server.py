@@ -171,29 +171,41 @@ def test_bnb_options_are_server_parameters(tmp_path):
         assert server.stop() == 0
 
 
-def test_map_from_occupancy_grid_topic(tmp_path):
-    """use_map_topic: the map arrives as a transient-local OccupancyGrid, like nav2's map_server."""
+def office_grid_msg(origin_x=None):
     import numpy as np
-    import rclpy
     from nav_msgs.msg import OccupancyGrid
 
     from global_loc.core.map_io import load_map_yaml
-    env = isolated_env()
     m = load_map_yaml(OFFICE_YAML)
+    msg = OccupancyGrid()
+    msg.header.frame_id = 'map'
+    msg.info.resolution, msg.info.width, msg.info.height = m.resolution, m.width, m.height
+    msg.info.origin.position.x = m.origin.x if origin_x is None else origin_x
+    msg.info.origin.position.y = m.origin.y
+    msg.info.origin.orientation.w = 1.0
+    msg.data = np.flipud(m.occupancy).astype(np.int8).ravel().tolist()
+    return msg
+
+
+def test_map_from_occupancy_grid_topic(tmp_path):
+    """use_map_topic: the map arrives as a transient-local OccupancyGrid, like nav2's map_server."""
+    import rclpy
+    from nav_msgs.msg import OccupancyGrid
+    env = isolated_env()
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']))
     node = rclpy.create_node('test_map_server', context=context)
     pub = node.create_publisher(OccupancyGrid, '/map', reliable(depth=1, latched=True))
-    msg = OccupancyGrid()
-    msg.header.frame_id = 'map'
-    msg.info.resolution, msg.info.width, msg.info.height = m.resolution, m.width, m.height
-    msg.info.origin.position.x, msg.info.origin.position.y = m.origin.x, m.origin.y
-    msg.info.origin.orientation.w = 1.0
-    msg.data = np.flipud(m.occupancy).astype(np.int8).ravel().tolist()
-    pub.publish(msg)     # before the server exists: transient local delivers it late
+    # D5 (issue 18): a NaN origin was accepted and NaN poses published
+    pub.publish(office_grid_msg(origin_x=float('nan')))   # before the server exists: transient local
     server = start_server(env, tmp_path / 'server.log', 'use_map_topic:=true')
     publisher = start_scan_publisher(env, tmp_path / 'pub.log', OFFICE_YAML, TRUTH)
     try:
+        server.wait_for_output('map not loaded')
+        assert 'origin must be finite' in server.output()
+        code, result = localize(env, '--timeout', '10')
+        assert code == 1 and result['outcome'] == 'no_map' and 'origin must be finite' in result['message'], result
+        pub.publish(office_grid_msg())
         server.wait_for_output('map OccupancyGrid on map: 520 x 360 cells')
         code, result = localize(env, '--timeout', '10')
         assert code == 0, (result, server.output())
@@ -226,6 +238,29 @@ def test_ambiguous_place_publishes_nothing_unless_asked(tmp_path):
     finally:
         publisher.stop()
         listener.close()
+        assert server.stop() == 0
+
+
+def test_search_limit_and_missing_surf_end_goals_with_their_reason(tmp_path):
+    """D11: max_search_s ends a goal that would search for minutes ("search incomplete");
+    D10: features_surf without SURF is a bad goal with the reason, not an internal error."""
+    from global_loc.core.matchers.features import surf_available
+    env = isolated_env()
+    server = start_server(env, tmp_path / 'server.log', 'max_search_s:=1.0')
+    publisher = start_scan_publisher(env, tmp_path / 'pub.log', OFFICE_YAML, TRUTH)
+    try:
+        t0 = time.monotonic()
+        code, result = localize(env, '--method', 'template_ccoeff', '--angle-step', '0.01', '--timeout', '10')
+        assert code == 1 and result['outcome'] == 'search_incomplete', result
+        assert '1 s search limit' in result['message'] and time.monotonic() - t0 < 30
+        if not surf_available():
+            code, result = localize(env, '--method', 'features_surf')
+            assert code == 1 and result['outcome'] == 'bad_goal' and 'SURF is not in this OpenCV build' in \
+                result['message'], result
+        assert 'internal error' not in server.output() and 'Traceback' not in server.output()
+        assert localize(env, '--timeout', '10')[0] == 0
+    finally:
+        publisher.stop()
         assert server.stop() == 0
 
 

@@ -23,6 +23,7 @@ from tqdm import tqdm
 from .relocalization import relocalization_rows
 from .report import BASELINE, write_report
 from .scaling import SIZES, scaling_rows
+from .soak import soak_rows, soak_summary
 from .suites import (
     ANGLE_STEP_METHODS,
     METHODS,
@@ -66,7 +67,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog='python -m global_loc.bench', description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='few poses and maps: a few minutes')
     parser.add_argument('--suites', default='cut,sim,carmen,prior,relocalization,scaling',
-                        help='comma-separated: cut, sim, carmen, prior, relocalization, scaling')
+                        help='comma-separated: cut, sim, carmen, prior, relocalization, scaling; and soak (the real '
+                             'server and simulator under faults, not in the default set)')
+    parser.add_argument('--soak-goals', type=int, default=0, help='goals of the soak suite (default 1000, quick 40)')
     parser.add_argument('--methods', default=','.join(METHODS))
     parser.add_argument('--jobs', type=int, default=os.cpu_count() or 1, help='worker processes')
     parser.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'), help='shared/data folder')
@@ -128,8 +131,13 @@ def main(argv=None) -> int:
         notes['scaling'] = scaling_rows(building, real, 3 if args.quick else max(5, poses // 4), args.seed,
                                         [m for m in methods if m in ('bnb', BASELINE)],
                                         SIZES[:3] if args.quick else SIZES)
+    if 'soak' in suites:
+        print('soak suite (server + simulator processes, faults) ...', file=sys.stderr)
+        soak = soak_rows(args.soak_goals or (40 if args.quick else 1000), args.seed, os.path.join(out, 'soak_logs'))
+        notes['soak'] = soak_summary(soak)
+        notes['soak_rows'] = soak
     with open(os.path.join(out, 'rows.jsonl'), 'w') as f:
-        for row in rows + notes.get('relocalization', []) + notes.get('scaling', []):
+        for row in rows + notes.get('relocalization', []) + notes.get('scaling', []) + notes.pop('soak_rows', []):
             f.write(json.dumps(row) + '\n')
     meta = {'machine': machine, 'command': 'python -m global_loc.bench ' + ' '.join(argv or sys.argv[1:]),
             'jobs': args.jobs, 'threads': threads, 'wall_time_s': round(time.time() - t0, 1), 'quick': args.quick,

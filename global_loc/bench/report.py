@@ -14,6 +14,7 @@ import numpy as np  # noqa: E402
 from ..core.scan import scan_to_points  # noqa: E402
 from ..core.transform import Rigid2D  # noqa: E402
 from ..plot import plot_localization  # noqa: E402
+from .soak import WARM_UP_GOALS  # noqa: E402
 
 BASELINE = 'template_ccoeff'
 
@@ -132,6 +133,8 @@ def write_report(rows, meta, out, maps, trials) -> None:
         md += prior_section(by_suite['prior'], out)
     if meta.get('relocalization'):
         md += relocalization_section(meta['relocalization'])
+    if meta.get('soak'):
+        md += soak_section(meta['soak'])
     if meta.get('scaling'):
         md += scaling_section(meta['scaling'], rows, out)
     md += failure_pictures(rows, trials, maps, out)
@@ -157,6 +160,37 @@ def prior_section(rows, out) -> list[str]:
                          f'| {pct(s["ok"])} | {pct(s["marked_wrong"])} | {secs(s["median"])} | {secs(s["p95"])} '
                          f'| {s["median"] / whole:.3f} |')
     return lines + ['']
+
+
+def soak_section(s: dict) -> list[str]:
+    """The soak suite's figures (bench/soak.py says what it runs)."""
+    def f(v, unit=''):
+        return '–' if v is None else (f'{v:.3f}{unit}' if isinstance(v, float) else f'{v}{unit}')
+    return ['## Soak and faults (real server and simulator processes)', '',
+            f'{s["goals"]} goals against `ros2 run global_loc server` (max_search_s 1 s) and the simulator node '
+            '(office, 40 Hz x 1081 beams): plain bnb goals with a kidnap before every 10th, goals ending at the '
+            'search limit (template matcher, 0.05° step), cancels at random moments, two clients at once, and a '
+            f'SIGTERM mid-goal every {s["restart_every"]} goals followed by a restart. RSS of the longest-running '
+            f'server process ({s["rss_goals"]} goals), after its first {WARM_UP_GOALS} goals; growth from then to its '
+            f'last goal for each server process: {s["rss_growth_pct"]} %.', '',
+            '| figure | value |', '|---|---|',
+            f'| plain goals: answered / success / success and right / success but wrong | {s["answered"]} of '
+            f'{s["plain"]} / {s["success"]} / {s["success_right"]} / {s["success_wrong"]} |',
+            f'| /initialpose messages / wrong (> 0.2 m or 5° off the true pose) | {f(s["initialposes"])} / '
+            f'{f(s["wrong_initialposes"])} |',
+            f'| server RSS start / middle / end / max [MB] | {f(s["rss_start_mb"])} / {f(s["rss_middle_mb"])} / '
+            f'{f(s["rss_end_mb"])} / {f(s["rss_max_mb"])} |',
+            f'| cancel goals / ended by the cancel: latency median / p95 / max [s] / unanswered | '
+            f'{s["cancel_goals"]} / {s["cancels"]}: {f(s["cancel_median_s"])} / {f(s["cancel_p95_s"])} / '
+            f'{f(s["cancel_max_s"])} / {s["cancels_unanswered"]} |',
+            f'| goal latency, median of the first / last 100 plain goals [s] | {f(s["latency_first100_median_s"])} '
+            f'/ {f(s["latency_last100_median_s"])} |',
+            f'| goals at the search limit: n / answered `search incomplete` | {s["limited"]} / '
+            f'{s["limited_incomplete"]} |',
+            f'| concurrent pairs | {s["concurrent"]} |',
+            f'| SIGTERM mid-goal + restart: n / goal answered / slowest exit [s] / exit codes | {s["restarts"]} / '
+            f'{s["restart_answered"]} / {f(s["exit_max_s"])} / {s["exit_codes"]} |',
+            f'| crashes (server or simulator) | {s["crashes"]} |', '']
 
 
 def scaling_section(rows, all_rows, out) -> list[str]:

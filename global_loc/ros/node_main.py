@@ -12,6 +12,8 @@ import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from .memory import limit_arenas
+
 
 def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]] = None,
              startup_errors: tuple = (), args=None) -> int:
@@ -19,6 +21,7 @@ def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]
     `startup_errors` (e.g. a map that cannot be loaded) is printed as one line and exits 1."""
     # `kill -USR1` prints every thread's stack: how a node that does not stop is diagnosed.
     faulthandler.register(signal.SIGUSR1, all_threads=True)
+    limit_arenas()       # before any thread starts (memory.py says why)
     # SIGINT and SIGTERM are handled here, not by rclpy: rclpy's handler shuts the context
     # down at once, so a running goal could no longer publish its feedback nor send its
     # result. Here a signal while spinning only asks the loop to stop; the node then winds
@@ -52,6 +55,9 @@ def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]
         if wind_down is not None and executor is not None and rclpy.ok():
             _spin_while_winding_down(executor, wind_down())
         if executor is not None:
+            # the callbacks handed to threads end first: shutdown destroys the guard
+            # condition they signal when they end
+            _wait_for_running_callbacks(executor, 1.0)
             executor.shutdown(timeout_sec=1.0)
         if node is not None:
             close = getattr(node, 'close', None)
@@ -76,6 +82,18 @@ class _StopRequest:
         self.requested.set()
         if first and not self.spinning:
             raise KeyboardInterrupt(f'signal {signum}')
+
+
+def _wait_for_running_callbacks(executor: Executor, limit_s: float) -> None:
+    """Wait until the callbacks a MultiThreadedExecutor handed to its threads have
+    returned, before the node is destroyed under them ("cannot use Destroyable because
+    destruction was requested"). rclpy Jazzy's Executor.shutdown does not wait for them
+    (it skips its wait when it is the call that marked the executor shut down); the
+    executor's own list of handed-out callbacks is the only record of them."""
+    deadline = time.monotonic() + limit_s
+    for future in list(getattr(executor, '_futures', [])):
+        while not future.done() and time.monotonic() < deadline:
+            time.sleep(0.005)
 
 
 def _spin_while_winding_down(executor: Executor, idle: Callable[[], bool], limit_s: float = 0.8,

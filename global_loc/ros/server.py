@@ -61,6 +61,7 @@ from .convert import (
     scan_from_msg,
     stamp_seconds,
 )
+from .memory import release_free_memory
 from .motion import resolve_by_motion
 from .mounting import LaserMounting
 from .node_main import run_node
@@ -292,6 +293,7 @@ class GlobalLocServer(LifecycleNode):
             return ended_result(Outcome.INTERNAL_ERROR, f'internal error: {type(e).__name__}: {e}')
         finally:
             self.busy.release()
+            release_free_memory()
 
     def refuse(self, outcome: Outcome, message: str) -> Localize.Result:
         self.get_logger().warn(f'refused: {message}')

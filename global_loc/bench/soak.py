@@ -1,0 +1,256 @@
+"""The `soak` suite: the real server against the simulator node for many goals, with the
+faults a deployed robot meets. Not a test: it reports figures for the report.
+
+Processes: `ros2 run global_loc sim` (office, 40 Hz x 1081 beams over 270 deg) and
+`ros2 run global_loc server` (max_search_s 1 s) on a private DDS domain; this process
+sends the goals (an action client in its own rclpy context). The goal mix, seeded:
+- plain bnb goals, publishing /initialpose; every 10th goal the robot is first kidnapped
+  (teleported to a random free pose);
+- every 10th a goal whose search ends at its time limit (the template matcher at a
+  0.05 deg step: 7200 rotations), cancelled or not;
+- every 7th a goal cancelled at a random moment (0.05 - 0.8 s after it was accepted;
+  alternately bnb and the template matcher at 1 deg, which runs ~2 s);
+- every 13th two goals at once (one must get `busy`);
+- every 250 goals (every 20 in a run of fewer than 500) a SIGTERM mid-goal, then the
+  server is started again.
+Measured: success and wrong (marked success, > 0.2 m / 5 deg off the simulator's true
+pose), every /initialpose checked against the true pose, the server's RSS (start /
+middle / end after warm-up), cancel latency (cancel sent -> result received), goal
+latency at the start and the end, SIGTERM exit time, crashes (a server exit code other
+than 0, or a process that died on its own).
+"""
+from __future__ import annotations
+
+import math
+import os
+import sys
+import threading
+import time
+
+import numpy as np
+from tqdm import tqdm
+
+from ..core.map_io import load_map_yaml
+from ..core.paths import default_map_yaml
+from ..core.transform import Rigid2D, pose_correct
+from ..sim.raycast import sample_free_poses
+
+WARM_UP_GOALS = 20
+
+
+def rss_mb(pid: int) -> float:
+    try:
+        with open(f'/proc/{pid}/status') as f:
+            return next(int(line.split()[1]) / 1024 for line in f if line.startswith('VmRSS:'))
+    except (OSError, StopIteration):
+        return float('nan')
+
+
+class Harness:
+    """This process's ROS side: the action client, the true pose, /initialpose, kidnaps."""
+
+    def __init__(self, env: dict):
+        import rclpy
+        from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+        from rclpy.action import ActionClient
+        from rclpy.executors import SingleThreadedExecutor
+
+        from global_loc_interfaces.action import Localize
+
+        from ..ros.convert import pose_from_msg
+        from ..ros.processes import reliable
+        self.Localize, self.PoseStamped = Localize, PoseStamped
+        self.pose_from_msg = pose_from_msg
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=int(env['ROS_DOMAIN_ID']))
+        self.node = rclpy.create_node('global_loc_soak', context=self.context)
+        self.client = ActionClient(self.node, Localize, 'localize')
+        self.truth = None
+        self.wrong_initialposes, self.initialposes = 0, 0
+        self.node.create_subscription(PoseStamped, '/sim/true_pose', self.on_truth, reliable(1, latched=True))
+        self.node.create_subscription(PoseWithCovarianceStamped, '/initialpose', self.on_initialpose, reliable())
+        self.set_pose = self.node.create_publisher(PoseStamped, '/sim/set_pose', 10)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.stopping = threading.Event()
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self):
+        while not self.stopping.is_set():
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def on_truth(self, msg):
+        self.truth = self.pose_from_msg(msg.pose)
+
+    def on_initialpose(self, msg):
+        self.initialposes += 1
+        if self.truth is not None and not pose_correct(self.pose_from_msg(msg.pose.pose), self.truth):
+            self.wrong_initialposes += 1
+
+    def kidnap(self, pose: Rigid2D) -> None:
+        from ..ros.convert import pose_to_msg
+        msg = self.PoseStamped()
+        msg.header.frame_id = 'map'
+        msg.pose = pose_to_msg(pose)
+        self.set_pose.publish(msg)
+        deadline = time.monotonic() + 2.0      # until the simulator reports the new pose
+        while time.monotonic() < deadline and (self.truth is None or not pose_correct(self.truth, pose, 0.05, 1.0)):
+            time.sleep(0.01)
+        time.sleep(0.1)      # a scan taken after the teleport
+
+    def wait(self, future, timeout: float):
+        deadline = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < deadline:
+            time.sleep(0.002)
+        return future.result() if future.done() else None
+
+    def send(self, **fields):
+        """Send a goal; (goal handle or None, seconds until accepted)."""
+        if not self.client.wait_for_server(timeout_sec=20.0):
+            return None
+        goal = self.Localize.Goal(timeout_s=5.0, **fields)
+        return self.wait(self.client.send_goal_async(goal), 20.0)
+
+    def close(self):
+        self.stopping.set()
+        self.thread.join(timeout=5.0)
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+def soak_rows(goals: int, seed: int, log_dir: str) -> list[dict]:
+    from ..ros.processes import isolated_env, start_server, start_sim
+    rng = np.random.default_rng(seed)
+    office = load_map_yaml(default_map_yaml())
+    kidnap_poses = sample_free_poses(office, 200, rng, clearance=0.6)
+    env = isolated_env()
+    os.makedirs(log_dir, exist_ok=True)
+    sim = start_sim(env, os.path.join(log_dir, 'sim.log'), 'rate_hz:=40.0', 'num_beams:=1081', 'fov_deg:=270.0',
+                    'x:=3.0', 'y:=4.0', 'yaw:=0.7')
+    servers, rows = [], []
+    server_params = ('max_search_s:=1.0', 'scan_timeout_s:=5.0')
+
+    def new_server():
+        servers.append(start_server(env, os.path.join(log_dir, f'server{len(servers)}.log'), *server_params))
+        return servers[-1]
+
+    server = new_server()
+    h = Harness(env)
+    restart_every = 250 if goals >= 500 else 20
+    try:
+        for i in tqdm(range(goals), desc='soak goals', file=sys.stderr):
+            row = {'suite': 'soak', 'goal': i}
+            if i % 10 == 5:
+                h.kidnap(kidnap_poses[int(rng.integers(len(kidnap_poses)))])
+                row['kidnap'] = True
+            if i % restart_every == restart_every - 1:     # SIGTERM mid-goal, then start again
+                handle = h.send(method='template_ccoeff', angle_step_deg=0.05)
+                result_future = handle.get_result_async() if handle is not None else None
+                time.sleep(0.3)
+                t0 = time.monotonic()
+                code = server.stop(timeout=10.0)
+                res = h.wait(result_future, 3.0) if result_future is not None else None
+                row.update(kind='restart', exit_s=time.monotonic() - t0, exit_code=code, answered=res is not None,
+                           outcome=res.result.outcome if res else None)
+                server = new_server()
+            elif i % 10 == 3:                      # ends at the 1 s search limit (or a cancel)
+                handle = h.send(method='template_ccoeff', angle_step_deg=0.05)
+                res = h.wait(handle.get_result_async(), 30.0) if handle else None
+                row.update(kind='limited', outcome=res.result.outcome if res else None)
+            elif i % 7 == 2:                       # cancelled at a random moment
+                method = 'bnb' if (i // 7) % 2 else 'template_ccoeff'
+                handle = h.send(publish_initialpose=True, method=method, angle_step_deg=1.0)
+                row['method'] = method
+                if handle is not None:
+                    time.sleep(float(rng.uniform(0.05, 0.8)))
+                    result_future = handle.get_result_async()
+                    t0 = time.monotonic()
+                    handle.cancel_goal_async()
+                    res = h.wait(result_future, 10.0)
+                    row.update(kind='cancel', cancel_s=time.monotonic() - t0 if res else None,
+                               outcome=res.result.outcome if res else None)
+            elif i % 13 == 6:                      # two clients at once
+                a, b = h.send(publish_initialpose=True), h.send(publish_initialpose=True)
+                outcomes = [h.wait(x.get_result_async(), 30.0) for x in (a, b) if x is not None]
+                row.update(kind='concurrent', outcomes=[r.result.outcome for r in outcomes if r])
+            else:
+                truth = h.truth
+                t0 = time.monotonic()
+                handle = h.send(publish_initialpose=True)
+                res = h.wait(handle.get_result_async(), 30.0) if handle else None
+                row.update(kind='plain', latency_s=time.monotonic() - t0, answered=res is not None)
+                if res is not None:
+                    r = res.result
+                    row.update(outcome=r.outcome, success=bool(r.success))
+                    if len(r.hypotheses.poses) and truth is not None:
+                        estimate = h.pose_from_msg(r.pose.pose.pose)
+                        row.update(ok=pose_correct(estimate, truth), estimate=estimate.as_tuple(),
+                                   truth=truth.as_tuple(), truth_after=h.truth.as_tuple())
+            row['rss_mb'] = rss_mb(server.proc.pid)
+            row['server'] = len(servers) - 1
+            row['server_alive'] = server.proc.poll() is None
+            row['sim_alive'] = sim.proc.poll() is None
+            rows.append(row)
+            if not row['server_alive']:        # a crash: note it and go on with a new server
+                row['crash_code'] = server.proc.returncode
+                server = new_server()
+        time.sleep(0.5)
+        rows.append({'suite': 'soak', 'kind': 'summary', 'initialposes': h.initialposes,
+                     'wrong_initialposes': h.wrong_initialposes})
+    finally:
+        h.close()
+        t0 = time.monotonic()
+        code = server.stop(timeout=10.0)
+        rows.append({'suite': 'soak', 'kind': 'final_stop', 'exit_s': time.monotonic() - t0, 'exit_code': code})
+        sim_code = sim.stop(timeout=10.0)
+        rows.append({'suite': 'soak', 'kind': 'sim_stop', 'exit_code': sim_code})
+    return rows
+
+
+def soak_summary(rows: list[dict]) -> dict:
+    """The figures the report prints."""
+    plain = [r for r in rows if r.get('kind') == 'plain']
+    answered = [r for r in plain if r.get('answered')]
+    # RSS per server process (a restart starts a new one), after its first WARM_UP_GOALS goals
+    segments = {}
+    for r in rows:
+        if 'rss_mb' in r and math.isfinite(r['rss_mb']) and r.get('kind') != 'restart':
+            segments.setdefault(r['server'], []).append(r['rss_mb'])
+    warm_segments = [v[WARM_UP_GOALS:] for v in segments.values() if len(v) > WARM_UP_GOALS]
+    warm = max(warm_segments, key=len) if warm_segments else []
+    growth = [100.0 * (v[-1] - v[0]) / v[0] for v in warm_segments]
+    # latency of the cancels that ended a goal (the others came after the goal had finished)
+    cancels = [r['cancel_s'] for r in rows if r.get('kind') == 'cancel' and r.get('outcome') == 15]
+    restarts = [r for r in rows if r.get('kind') == 'restart']
+    stops = restarts + [r for r in rows if r.get('kind') == 'final_stop']
+    lat = [r['latency_s'] for r in answered]
+    summary = next((r for r in rows if r.get('kind') == 'summary'), {})
+    n = len([r for r in rows if 'goal' in r])
+    return {
+        'goals': n, 'plain': len(plain), 'answered': len(answered),
+        'success': sum(bool(r.get('success')) for r in answered),
+        'success_right': sum(bool(r.get('success')) and bool(r.get('ok')) for r in answered),
+        'success_wrong': sum(bool(r.get('success')) and r.get('ok') is False for r in answered),
+        'initialposes': summary.get('initialposes'), 'wrong_initialposes': summary.get('wrong_initialposes'),
+        'rss_start_mb': warm[0] if warm else None, 'rss_middle_mb': warm[len(warm) // 2] if warm else None,
+        'rss_end_mb': warm[-1] if warm else None, 'rss_max_mb': max(warm) if warm else None,
+        'rss_goals': len(warm), 'rss_growth_pct': [round(g, 1) for g in growth],
+        'restart_every': next((r['goal'] + 1 for r in rows if r.get('kind') == 'restart'), None),
+        'cancel_goals': sum(r.get('kind') == 'cancel' for r in rows), 'cancels': len(cancels),
+        'cancel_median_s': float(np.median(cancels)) if cancels else None,
+        'cancel_p95_s': float(np.percentile(cancels, 95)) if cancels else None,
+        'cancel_max_s': max(cancels) if cancels else None,
+        'cancels_unanswered': sum(r.get('kind') == 'cancel' and r.get('cancel_s') is None for r in rows),
+        'latency_first100_median_s': float(np.median(lat[:100])) if lat else None,
+        'latency_last100_median_s': float(np.median(lat[-100:])) if lat else None,
+        'limited': sum(r.get('kind') == 'limited' for r in rows),
+        'limited_incomplete': sum(r.get('kind') == 'limited' and r.get('outcome') == 4 for r in rows),
+        'concurrent': sum(r.get('kind') == 'concurrent' for r in rows),
+        'restarts': len(restarts), 'restart_answered': sum(bool(r.get('answered')) for r in restarts),
+        'exit_max_s': max((r['exit_s'] for r in stops), default=None),
+        'exit_codes': sorted({r['exit_code'] for r in stops}),
+        'crashes': sum('crash_code' in r for r in rows) + sum(r.get('kind') == 'sim_stop' and r['exit_code'] != 0
+                                                               for r in rows),
+    }
