@@ -24,7 +24,7 @@ from global_loc.core.scan import Scan, ScanError, scan_to_points
 from global_loc.core.search_region import SearchRegion
 from global_loc.core.transform import Rigid2D
 
-FUZZ = settings(derandomize=True, deadline=None, max_examples=60,
+FUZZ = settings(derandomize=True, database=None, deadline=None, max_examples=60,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
 any_float = st.floats(allow_nan=True, allow_infinity=True)

@@ -117,7 +117,8 @@ def test_goal_while_busy_is_aborted_with_a_reason(system):
         assert result['message'].startswith('busy: another localization is running')
     finally:
         slow_out, _ = slow.communicate(timeout=60)
-    assert json.loads(slow_out)['outcome'] in ('localized', 'canceled'), slow_out   # the first goal ran on
+    # the first goal ran on (to its end, its cancel, or its max_search_s)
+    assert json.loads(slow_out)['outcome'] in ('localized', 'canceled', 'search_incomplete'), slow_out
 
 
 def test_no_scan_within_timeout_aborts_then_next_goal_works(tmp_path):

@@ -55,22 +55,25 @@ def test_scan_from_json_with_null_ranges_and_missing_fields():
         Scan.from_dict({'angle_min': 'a', 'angle_increment': 0.1, 'range_min': 0, 'range_max': 5, 'ranges': []})
 
 
-def test_rasterize_puts_the_laser_at_the_centre_with_side_twice_max_range():
+def test_rasterize_puts_the_laser_at_the_centre_with_side_twice_the_farthest_point():
     pts = ScanPoints(np.array([[1.0, 0.0], [0.0, 0.5]]), range_max=2.0, num_beams=2)
     grid = rasterize(pts, 0.1)
-    assert grid.image.shape == (41, 41)
-    assert grid.laser_px == (20.0, 20.0)
-    assert grid.image[20, 30] == 255      # 1 m ahead: 10 columns right
-    assert grid.image[15, 20] == 255      # 0.5 m left (+y): 5 rows up
+    assert grid.image.shape == (23, 23)   # 1 m (10 cells) and one cell each side of the laser
+    assert grid.laser_px == (11.0, 11.0)
+    assert grid.image[11, 21] == 255      # 1 m ahead: 10 columns right
+    assert grid.image[6, 11] == 255       # 0.5 m left (+y): 5 rows up
     assert grid.image.sum() == 2 * 255
+    # a huge range_max (fuzzed: 1e308) does not size the image; max_range caps it
+    assert rasterize(ScanPoints(pts.points, range_max=1e308, num_beams=2), 0.1).image.shape == (23, 23)
+    assert rasterize(pts, 0.1, max_range=0.6).image.sum() == 255
 
 
 def test_crop_remembers_offsets_so_the_laser_pixel_moves():
     pts = ScanPoints(np.array([[1.0, 0.0], [1.0, 0.5]]), range_max=2.0, num_beams=2)
-    crop = crop_to_obstacles(rasterize(pts, 0.1))
+    crop = crop_to_obstacles(rasterize(pts, 0.1))     # half side: ceil(1.118 / 0.1) + 1 = 13 cells
     assert crop.image.shape == (6, 1)
-    assert crop.crop_offset == (30, 15)
-    assert crop.laser_px == (20.0 - 30, 20.0 - 15)
+    assert crop.crop_offset == (23, 8)
+    assert crop.laser_px == (13.0 - 23, 13.0 - 8)
 
 
 def test_opening_joins_a_dotted_wall_into_a_line_and_zero_kernel_is_off():

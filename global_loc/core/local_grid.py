@@ -9,6 +9,7 @@ is here a morphological *closing* of the obstacle pixels: the same operation.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -44,10 +45,13 @@ class LocalGrid:
         return self.frame.pixel_pose_to_world(*self.laser_px, 0.0)
 
 
-def rasterize(points: ScanPoints, resolution: float, laser_yaw: float = 0.0) -> LocalGrid:
+def rasterize(points: ScanPoints, resolution: float, laser_yaw: float = 0.0, max_range: float = math.inf) -> LocalGrid:
     """Draw the scan's points (rotated by `laser_yaw`) into a (2R/res + 1)^2 image with the
-    laser at the centre pixel."""
-    half = int(np.ceil(points.range_max / resolution))
+    laser at the centre pixel; R: the farthest point's range, at most `max_range` (farther
+    points are left out: a scan's range_max may be huge, and nothing beyond the map's
+    extent can match it)."""
+    farthest = float(np.hypot(points.points[:, 0], points.points[:, 1]).max(initial=0.0))
+    half = int(np.ceil(min(farthest, max_range) / resolution)) + 1
     frame = GridFrame.centred(resolution, half)
     cells = frame.cell_of(Rigid2D(0.0, 0.0, laser_yaw).apply(points.points))
     keep = frame.contains(cells)
@@ -83,9 +87,9 @@ def close_obstacles(grid: LocalGrid, kernel: int) -> LocalGrid:
 
 
 def build_local_grid(points: ScanPoints, resolution: float, opening_kernel: int,
-                     laser_yaw: float = 0.0) -> LocalGrid:
-    """Scan points -> rasterized, cropped, morphologically opened local map."""
-    return close_obstacles(crop_to_obstacles(rasterize(points, resolution, laser_yaw)), opening_kernel)
+                     laser_yaw: float = 0.0, max_range: float = math.inf) -> LocalGrid:
+    """Scan points -> rasterized, cropped, morphologically opened local map (points up to max_range)."""
+    return close_obstacles(crop_to_obstacles(rasterize(points, resolution, laser_yaw, max_range)), opening_kernel)
 
 
 def soften(image: np.ndarray) -> np.ndarray:

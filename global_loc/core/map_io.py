@@ -49,6 +49,11 @@ class OccupancyMap:
         return self.occupancy.shape[1]
 
     @property
+    def diagonal_m(self) -> float:
+        """The map's diagonal: no two points of it lie farther apart."""
+        return math.hypot(self.width, self.height) * self.resolution
+
+    @property
     def occupied(self) -> np.ndarray:
         """Boolean mask of occupied cells."""
         return self.occupancy >= 65

@@ -3,6 +3,8 @@ arrows with their scores, and the scan's local map placed at the estimate (the t
 own picture of a match) as an OccupancyGrid in the map frame."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from geometry_msgs.msg import PoseArray
 from nav_msgs.msg import OccupancyGrid
@@ -52,10 +54,10 @@ def markers_msg(result: LocalizationResult, frame_id: str, stamp) -> MarkerArray
 
 
 def local_map_msg(points: ScanPoints, resolution: float, opening_kernel: int, map_T_laser: Rigid2D,
-                  frame_id: str, stamp) -> OccupancyGrid:
+                  frame_id: str, stamp, max_range: float = math.inf) -> OccupancyGrid:
     """The scan's local map (rasterized, cropped, opened: core.local_grid) placed with the
     laser at `map_T_laser`; obstacle cells 100, the rest unknown."""
-    local = build_local_grid(points, resolution, opening_kernel)
+    local = build_local_grid(points, resolution, opening_kernel, max_range=max_range)
     map_T_grid = map_T_laser * local.grid_T_laser().inverse()
     msg = OccupancyGrid()
     msg.header.frame_id, msg.header.stamp = frame_id, stamp

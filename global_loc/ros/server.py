@@ -344,7 +344,7 @@ class GlobalLocServer(LifecycleNode):
         out = result_to_msg(result, self.settings.map_frame, msg.header.stamp, time.monotonic() - start)
         out.scan_stamp = msg.header.stamp
         out.scan_age_s = (self.get_clock().now() - Time.from_msg(msg.header.stamp)).nanoseconds * 1e-9
-        self.show(result, scan, base_T_laser, msg.header.stamp, localizer.map.resolution)
+        self.show(result, scan, base_T_laser, msg.header.stamp, localizer.map)
         summary = result.message
         if result.pose is not None:
             summary += f': {format_pose(result.pose)}, score {result.score:.3f}, {result.time_s:.2f} s'
@@ -354,14 +354,15 @@ class GlobalLocServer(LifecycleNode):
         self.get_logger().info(summary)
         return out
 
-    def show(self, result, scan, base_T_laser: Rigid2D, stamp, resolution: float) -> None:
+    def show(self, result, scan, base_T_laser: Rigid2D, stamp, occupancy_map) -> None:
         """The RViz topics for this localization."""
         frame = self.settings.map_frame
         self.pubs['hypotheses'].publish(hypotheses_msg(result, frame, stamp))
         self.pubs['markers'].publish(markers_msg(result, frame, stamp))
         if result.pose is not None:
-            self.pubs['local_map'].publish(local_map_msg(scan_to_points(scan), resolution, self.config.opening_kernel,
-                                                         result.pose * base_T_laser, frame, stamp))
+            self.pubs['local_map'].publish(local_map_msg(scan_to_points(scan), occupancy_map.resolution,
+                                                         self.config.opening_kernel, result.pose * base_T_laser,
+                                                         frame, stamp, occupancy_map.diagonal_m))
 
 
 def main(args=None):

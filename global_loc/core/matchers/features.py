@@ -72,7 +72,8 @@ class FeatureMatcher(Matcher):
         self.map_points = np.float32([kp.pt for kp in self.keypoints]).reshape(-1, 2)
 
     def match(self, points, options, progress=None):
-        local = build_local_grid(points, self.map.resolution, options.opening_kernel)
+        local = build_local_grid(points, self.map.resolution, options.opening_kernel,
+                                 max_range=self.map.diagonal_m)
         kps, desc = self.detector.detectAndCompute(soften(local.image), None)
         if progress:
             progress(0.3, 0.0)

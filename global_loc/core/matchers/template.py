@@ -36,7 +36,8 @@ class RotatedTemplateMatcher(Matcher):
         self.peak_radius_px = max(1, int(round(0.5 / occupancy_map.resolution)))
 
     def match(self, points, options, progress=None):
-        local = build_local_grid(points, self.map.resolution, options.opening_kernel)
+        local = build_local_grid(points, self.map.resolution, options.opening_kernel,
+                                 max_range=self.map.diagonal_m)
         angles = self.angles(options)
         laser = np.array([*local.laser_px, 1.0])
         candidates, best = [], -np.inf
