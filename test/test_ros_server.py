@@ -112,9 +112,11 @@ def test_goal_while_busy_is_aborted_with_a_reason(system):
         deadline = time.monotonic() + 20
         while server.output().count('matching a scan') == started and time.monotonic() < deadline:
             time.sleep(0.1)
+        busy_lines = server.output().count('refused: busy')
         code, result = localize(env)
         assert code == 1 and result['outcome'] == 'busy'
         assert result['message'].startswith('busy: another localization is running')
+        assert server.output().count('refused: busy') == busy_lines + 1       # logged once (issue 18)
     finally:
         slow_out, _ = slow.communicate(timeout=60)
     # the first goal ran on (to its end, its cancel, or its max_search_s)

@@ -170,9 +170,9 @@ def soak_section(s: dict) -> list[str]:
             f'{s["goals"]} goals against `ros2 run global_loc server` (max_search_s 1 s) and the simulator node '
             '(office, 40 Hz x 1081 beams): plain bnb goals with a kidnap before every 10th, goals ending at the '
             'search limit (template matcher, 0.05° step), cancels at random moments, two clients at once, and a '
-            f'SIGTERM mid-goal every {s["restart_every"]} goals followed by a restart. RSS of the longest-running '
-            f'server process ({s["rss_goals"]} goals), after its first {WARM_UP_GOALS} goals; growth from then to its '
-            f'last goal for each server process: {s["rss_growth_pct"]} %.', '',
+            f'SIGTERM mid-goal followed by a restart at goals {s["restart_goals"]}. RSS of the longest-running '
+            f'server process ({s["rss_goals"]} goals after its first {WARM_UP_GOALS}); growth from then to its '
+            f'last goal for each server process that ran more than {WARM_UP_GOALS}: {s["rss_growth_pct"]} %.', '',
             '| figure | value |', '|---|---|',
             f'| plain goals: answered / success / success and right / success but wrong | {s["answered"]} of '
             f'{s["plain"]} / {s["success"]} / {s["success_right"]} / {s["success_wrong"]} |',
