@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import faulthandler
+import os
 import signal
 import sys
 import threading
@@ -67,6 +68,16 @@ def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]
         if rclpy.ok():
             rclpy.shutdown()
     return code
+
+
+def exit_process(code: int) -> None:
+    """End the process once run_node has shut ROS down: flush and _exit. The interpreter's
+    own teardown (numba, OpenCV, numpy, thread pools) takes ~0.5 s after a clean ROS
+    shutdown and nothing in it is needed; a node must be gone within a second of SIGTERM
+    (measured: 0.77 s -> 0.2 s). An abandoned matchTemplate thread ends with the process."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 class _StopRequest:

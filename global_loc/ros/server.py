@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import sys
 import threading
 import time
 import traceback
@@ -64,7 +63,7 @@ from .convert import (
 from .memory import release_free_memory
 from .motion import resolve_by_motion
 from .mounting import LaserMounting
-from .node_main import run_node
+from .node_main import exit_process, run_node
 from .parameters import declare_server_parameters
 from .rviz import hypotheses_msg, local_map_msg, markers_msg
 from .watch import LocalizationWatch
@@ -367,7 +366,7 @@ class GlobalLocServer(LifecycleNode):
 
 def main(args=None):
     # Four threads: a running localization never starves the scan, cancel, service and lifecycle callbacks.
-    sys.exit(run_node(GlobalLocServer, lambda: MultiThreadedExecutor(num_threads=4), args=args))
+    exit_process(run_node(GlobalLocServer, lambda: MultiThreadedExecutor(num_threads=4), args=args))
 
 
 if __name__ == '__main__':

@@ -9,7 +9,6 @@ nav_msgs/Odometry on /odom (frame `odom`, child `base_link`; noise and drift set
 """
 from __future__ import annotations
 
-import sys
 import time
 
 from geometry_msgs.msg import PoseStamped, Twist
@@ -25,7 +24,7 @@ from ..core.transform import Rigid2D, format_pose
 from ..sim.laser import LaserConfig
 from ..sim.simulator import OdometryNoise, Simulator
 from .convert import pose_from_msg, pose_to_msg, scan_to_msg
-from .node_main import run_node
+from .node_main import exit_process, run_node
 
 
 class SimNode(Node):
@@ -104,7 +103,7 @@ class SimNode(Node):
 
 
 def main(args=None):
-    sys.exit(run_node(SimNode, startup_errors=(MapError,), args=args))
+    exit_process(run_node(SimNode, startup_errors=(MapError,), args=args))
 
 
 if __name__ == '__main__':
