@@ -100,7 +100,10 @@ def run(node, args) -> int:
             last_stage[0] = f.stage
 
     send = client.send_goal_async(goal, feedback_callback=on_feedback)
-    rclpy.spin_until_future_complete(node, send)
+    if not wait_while_served(node, client, send, args.server_timeout) or not send.done():
+        print(f'error: the global_loc server did not answer the goal request within {args.server_timeout:.0f} s '
+              f'(it stopped, or the request was lost while it was starting)', file=sys.stderr)
+        return 2
     handle = send.result()
     if handle is None or not handle.accepted:
         print('error: the server rejected the goal', file=sys.stderr)
