@@ -49,7 +49,7 @@ def parse_truth(value) -> Rigid2D | None:
     if value is None:
         return None
     try:
-        if not isinstance(value, dict) or isinstance(value.get('x'), bool):
+        if not isinstance(value, dict) or any(isinstance(value.get(k), bool) for k in ('x', 'y', 'yaw')):
             raise TypeError
         x, y, yaw = (float(value[k]) for k in ('x', 'y', 'yaw'))
     except (KeyError, TypeError, ValueError):

@@ -15,7 +15,7 @@ import numpy as np
 
 from .map_io import OccupancyMap
 from .matchers import BranchAndBoundOptions, MatchOptions, make_matcher, resolve_method
-from .matchers.base import ProgressFn, Verdict, distinct
+from .matchers.base import ProgressFn, distinct
 from .outcome import Outcome
 from .scan import Scan, ScanPoints, require_shape, scan_to_points
 from .search_region import SearchRegion
@@ -77,6 +77,7 @@ class Localizer:
         self.map = occupancy_map
         self.config = config or LocalizerConfig()
         self._matchers = {}
+        self._has_obstacles = bool(occupancy_map.occupied.any())   # once per map, not per scan
 
     def matcher(self, method: str):
         """The matcher for `method`, built (precomputed for this map) on first use."""
@@ -111,7 +112,7 @@ class Localizer:
                                opening_kernel=cfg.opening_kernel,
                                region=region.for_laser(base_T_laser) if bounded else None,
                                max_search_s=cfg.max_search_s)
-        if not self.map.occupied.any():
+        if not self._has_obstacles:
             return LocalizationResult(Outcome.NO_MATCH, f'the map {self.map.source} has no obstacles (no occupied '
                                                         f'cell) to match a scan against', matcher.name,
                                       time_s=time.perf_counter() - t0, dropped=points.dropped)
@@ -123,9 +124,6 @@ class Localizer:
         best = distinct(candidates, cfg.num_hypotheses, cfg.hypothesis_min_distance,
                         math.radians(cfg.hypothesis_min_angle_deg))
         verdict = matcher.judge(best, found.stats)
-        if verdict.outcome == Outcome.LOCALIZED and not verdict.confidence > 0:    # any matcher, any options
-            verdict = Verdict(Outcome.AMBIGUOUS, 0.0, 'ambiguous: confidence 0 (the best place ties with another); '
-                                                      'see the hypotheses')
         hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in best]
         result = LocalizationResult(verdict.outcome, verdict.message, matcher.name, confidence=verdict.confidence,
                                     hypotheses=hyps, time_s=time.perf_counter() - t0, dropped=points.dropped,

@@ -115,15 +115,15 @@ def from_occupancy_grid(width, height, resolution, origin, data, source='<Occupa
         origin = origin.as_tuple() if isinstance(origin, Rigid2D) else tuple(float(v) for v in origin)
     except (TypeError, ValueError) as e:
         raise MapError(f'{source}: bad origin: {e}') from None
-    if len(origin) != 3:
-        raise MapError(f'{source}: origin must be (x, y, yaw), got {origin}')
     origin = Rigid2D(*check_origin(origin, source))
     return make_map(np.flipud(grid).astype(np.int8), resolution, origin, source)
 
 
 def check_origin(origin, source: str):
-    """The map origin (x, y, yaw) if every value is finite; MapError otherwise (a NaN origin
-    would put every pose the matchers return at NaN)."""
+    """The map origin (x, y, yaw) if it has three values, every one finite; MapError
+    otherwise (a NaN origin would put every pose the matchers return at NaN)."""
+    if len(origin) != 3:
+        raise MapError(f'{source}: origin must be [x, y, yaw], got {list(origin)}')
     if not all(math.isfinite(v) for v in origin):
         raise MapError(f'{source}: origin must be finite numbers (x, y, yaw), got {list(origin)}')
     return origin
@@ -166,8 +166,6 @@ def load_map_yaml(path) -> OccupancyMap:
     mode = doc.get('mode', 'trinary')
     if not math.isfinite(resolution) or resolution <= 0:
         raise MapError(f'{path}: resolution must be a positive number, got {resolution}')
-    if len(origin) != 3:
-        raise MapError(f'{path}: origin must be [x, y, yaw], got {doc["origin"]}')
     check_origin(origin, path)
     if not (0.0 <= free_th < occ_th <= 1.0):
         raise MapError(f'{path}: need 0 <= free_thresh < occupied_thresh <= 1, '

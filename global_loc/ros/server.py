@@ -171,8 +171,7 @@ class GlobalLocServer(LifecycleNode):
 
     def stop_work(self, timeout: float = 2.0) -> None:
         """Stop accepting work and end a running localization (canceled); wait for it to end."""
-        self.active = False
-        self.stopping.set()
+        self.wind_down()
         if self.busy.acquire(timeout=timeout):
             self.busy.release()
 

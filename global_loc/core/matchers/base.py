@@ -118,8 +118,6 @@ class Matcher(ABC):
             return Verdict(Outcome.NO_MATCH, 0.0, f'{self.name} found no match')
         best = scores[0]
         conf = 1.0 if len(scores) == 1 else float(np.clip((best - scores[1]) / best, 0.0, 1.0)) if best > 0 else 0.0
-        if not math.isfinite(conf):
-            conf = 0.0
         if best < self.min_score:
             return Verdict(Outcome.POOR_MATCH, conf,
                            f'best score {best:.3f} is below {self.name}\'s minimum {self.min_score}')

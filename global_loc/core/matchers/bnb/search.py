@@ -91,7 +91,7 @@ class ThreadedSearch:
                 results = list(self._executor(threads).map(run, range(threads), [budget] * threads))
             expanded += sum(n for n, _ in results)
             found.extend(leaves for _, leaves in results)
-            if all(done) or expanded >= max_nodes or time.monotonic() > deadline:
+            if all(done) or expanded >= max_nodes:     # (the deadline: the loop's condition)
                 break
             for k in range(threads):      # an idle thread takes half of the fullest heap
                 if done[k]:
