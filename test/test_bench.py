@@ -18,3 +18,16 @@ def test_bench_writes_rows_report_and_plots(tmp_path):
     assert 'Suite 1: local maps cut from the map' in report and '| cores |' in report
     assert 'time / baseline' in report and 'git_commit' in report
     assert (tmp_path / 'cut_time_vs_size.png').stat().st_size > 5000
+
+
+def test_search_share_table_splits_bnb_time_into_the_search_and_the_rest():
+    from global_loc.bench.report import search_share_table
+    rows = [{'method': 'bnb', 'cond': 'a', 'time_s': t, 'search_s': s} for t, s in ((0.02, 0.015), (0.04, 0.03),
+                                                                                  (0.03, 0.01))]
+    rows += [{'method': 'template_ccoeff', 'cond': 'a', 'time_s': t, 'ok': True, 'ok_loose': True, 'success': True}
+             for t in (0.5, 0.8, 1.0)]
+    table = search_share_table(rows, lambda r: r['cond'], 'condition').splitlines()
+    # medians: total 0.03, search 0.015, rest 0.01 (of 0.005, 0.01, 0.02), share 25% (of 25, 25, 67%);
+    # baseline 0.8, its 1% 0.008
+    assert table[2] == '| a | 3 | 0.030 | 0.015 | 0.010 | 25% | 0.800 | 0.008 |'
+    assert search_share_table([r for r in rows if r['method'] != 'bnb'], lambda r: r['cond'], 'condition') == ''

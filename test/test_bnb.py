@@ -86,7 +86,11 @@ def test_bnb_localizes_raycast_scans_on_the_office(office_map):
     rng = np.random.default_rng(2026)
     for truth in sample_free_poses(office_map, 4, rng):
         scan = simulate_scan(office_map, truth, 270.0, 541, 20.0, noise_std=0.01, dropout=0.02, rng=rng)
-        assert_pose_near(localizer.localize(scan, method='bnb').pose, truth, 0.1, 2.0)
+        result = localizer.localize(scan, method='bnb')
+        assert_pose_near(result.pose, truth, 0.1, 2.0)
+        # the search's statistics reach the result; its time is part of the localization's
+        assert result.search_stats.exact and result.search_stats.expansions > 0
+        assert 0 < result.search_stats.search_s < result.time_s
 
 
 def test_four_fold_symmetric_room_is_ambiguous_with_the_truth_among_the_hypotheses():

@@ -66,6 +66,27 @@ def method_table(rows, label_fn, label_name, methods, baseline_rows=None) -> str
     return '\n'.join(lines)
 
 
+def search_share_table(rows, label_fn, label_name) -> str:
+    """bnb's median time split into the search proper and the fixed work around it
+    (scan tables, refinement, free-space check, covariance, verdict), beside 1% of the
+    thesis baseline's median: what a localization may take to be 100x faster."""
+    lines = [f'| {label_name} | n | bnb median [s] | search [s] | the rest [s] | rest share | baseline median [s] '
+             f'| 1% of baseline [s] |', '|---|---|---|---|---|---|---|---|']
+    for label, group_rows in sorted(group(rows, label_fn).items(), key=lambda kv: str(kv[0])):
+        timed = [r for r in group_rows if r['method'] == 'bnb' and r.get('search_s') is not None
+                 and math.isfinite(r.get('time_s', float('nan')))]
+        if not timed:
+            continue
+        total = np.array([r['time_s'] for r in timed])
+        search = np.array([r['search_s'] for r in timed])
+        rest = total - search
+        base = stats([r for r in group_rows if r['method'] == BASELINE and r.get('angle_step', 5) == 5])['median']
+        lines.append(f'| {label} | {len(timed)} | {secs(float(np.median(total)))} | {secs(float(np.median(search)))} '
+                     f'| {secs(float(np.median(rest)))} | {pct(float(np.median(rest / total)))} | {secs(base)} '
+                     f'| {secs(base / 100)} |')
+    return '\n'.join(lines) if len(lines) > 2 else ''
+
+
 def cond_label(r):
     c = f'{r["fov"]}° / {r["range"]} m / Δα {r["angle_step"]:g}°'
     return c + (f' / clutter {r["clutter"]}' if r.get('clutter') else '')
@@ -102,6 +123,10 @@ def write_report(rows, meta, out, maps, trials) -> None:
                method_table([r for r in sim if r['fov'] == 270 and r['range'] == 20 and r['angle_step'] == 5
                              and not r['clutter']], lambda r: r['map'], 'map', methods), '',
                '![success by factor](sim_factors.png)', '', '![time by map](sim_time.png)', '']
+        share = search_share_table([r for r in sim if r['angle_step'] == 5], cond_label, 'condition')
+        if share:
+            md += ['Where bnb\'s time goes (medians over the trials; "the rest": building the scan\'s angle tables, '
+                   'refining the peaks, the free-space check, the covariance and the verdict):', '', share, '']
         plot_sim(sim, methods, out)
     if 'cut' in by_suite:
         cut = by_suite['cut']

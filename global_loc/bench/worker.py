@@ -37,6 +37,9 @@ def run_job(job):
                top4_ok=any(pose_correct(h.pose, trial.truth) for h in res.hypotheses[:4]),
                hyp_scores=[round(h.score, 4) for h in res.hypotheses[:4]], message=res.message.split(':')[0],
                outcome=res.outcome.label)
+    search_s = getattr(res.search_stats, 'search_s', None)
+    if search_s is not None:      # bnb: the search proper, apart from the fixed work around it
+        row.update(search_s=search_s, expansions=res.search_stats.expansions)
     if res.pose is None:
         row.update(ok=False, ok_loose=False)
     else:

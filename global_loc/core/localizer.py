@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Any, Optional
 
 import numpy as np
 
@@ -66,6 +66,7 @@ class LocalizationResult:
     hypotheses: list = field(default_factory=list)
     time_s: float = 0.0
     dropped: dict = field(default_factory=dict)
+    search_stats: Any = None   # what the matcher's search did (bnb: SearchStats), for diagnostics
 
     @property
     def success(self) -> bool:
@@ -127,7 +128,8 @@ class Localizer:
         hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in best]
         result = LocalizationResult(verdict.outcome, verdict.message, matcher.name, confidence=verdict.confidence,
                                     hypotheses=hyps, time_s=time.perf_counter() - t0, dropped=points.dropped,
-                                    covariance=np.diag([cfg.covariance_xy, cfg.covariance_xy, cfg.covariance_yaw]))
+                                    covariance=np.diag([cfg.covariance_xy, cfg.covariance_xy, cfg.covariance_yaw]),
+                                    search_stats=found.stats)
         if hyps:
             result.pose, result.score = hyps[0].pose, hyps[0].score
             if best[0].covariance is not None:

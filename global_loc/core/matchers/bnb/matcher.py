@@ -120,10 +120,12 @@ class BranchAndBoundMatcher(Matcher):
             return Match([])
         # 2. Branch and bound down to keep_ratio x the best leaf.
         tables = self.tables(pts, d0, n_angles)
+        search_start = time.perf_counter()
         bounds = node_bounds(self.stack.planes, tables, tu, tv, ta, top)
         leaves, per_level, exact = self.searcher.run(
             self.stack.planes, tables, self.stack.free, space,
             np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, opt.max_nodes, progress, deadline)
+        search_s = time.perf_counter() - search_start
         scores = leaves[:, 3] / (255.0 * len(pts))
         expansions = int(per_level.sum())
         stopped = '' if exact else (f'stopped after {expansions} node expansions' if expansions >= opt.max_nodes
@@ -131,7 +133,7 @@ class BranchAndBoundMatcher(Matcher):
         stats = SearchStats(exact=exact, angles=n_angles, points=len(pts), leaves=len(scores),
                             expansions=expansions, per_level=tuple(per_level.tolist()), top_nodes=len(tu),
                             threads=search_threads(), best_leaf=float(scores.max()) if len(scores) else 0.0,
-                            stopped=stopped)
+                            stopped=stopped, search_s=search_s)
         # 3. Peaks, refined, checked for free space, ranked.
         candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], scores, pts, d0, points)
         if progress:

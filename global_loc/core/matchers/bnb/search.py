@@ -37,6 +37,8 @@ class SearchStats:
     threads: int
     best_leaf: float       # the best leaf's score, in [0, 1]
     stopped: str = ''      # why a search that is not exact stopped (its budget of nodes or of time)
+    search_s: float = 0.0  # seconds in the search proper (the top nodes' bounds and the tree), not in
+                           # preparing the scan's tables or refining, checking and ranking the peaks
 
 
 def search_threads() -> int:
