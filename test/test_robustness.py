@@ -40,6 +40,14 @@ def test_d4_d10_a_scan_without_a_shape_is_a_clear_error_for_every_method(method,
         loc.localize(degenerate_scans()[name], method)
 
 
+def test_distinct_points_are_counted_up_to_three_as_a_full_unique_would():
+    from global_loc.core.scan import count_distinct_up_to_3
+    rng = np.random.default_rng(0)
+    for _ in range(2000):      # few rows over few values: every case of 0 .. 3+ distinct, repeats, order
+        rows = rng.integers(0, rng.integers(1, 4), (rng.integers(0, 7), 2)).astype(float)
+        assert count_distinct_up_to_3(rows) == min(3, len(np.unique(rows, axis=0)))
+
+
 def test_d4_a_tie_is_never_a_success_for_any_matcher(office_map):
     """The thesis matchers localized a scan when its best score passed their minimum,
     even tied with the next place (confidence 0)."""

@@ -61,6 +61,10 @@ class PrecomputationGridStack:
                     self.index[h, m] = len(self.index)
                     if m >= self.margin(h):
                         break
+        # per level: its kept widenings, ascending, and their planes' indices (grid_ids looks them up)
+        self.level_margins = [np.array([m for (k, m) in self.index if k == h], np.int64) for h in range(options.levels)]
+        self.level_grids = [np.array([i for (k, _), i in self.index.items() if k == h], np.int64)
+                            for h in range(options.levels)]
         sizes = [(height >> int(shift[h])) * (width >> int(shift[h])) for h, _ in self.index]
         self.offsets = np.cumsum([0] + sizes[:-1]).astype(np.int64)
         flat = np.empty(sum(sizes), np.uint8)      # written plane by plane: no list to concatenate
@@ -110,8 +114,5 @@ class PrecomputationGridStack:
         just enough for the point's range."""
         out = np.full((self.options.levels, len(ranges)), self.index[0, 0], np.int64)
         for h in range(1, self.options.levels):
-            need = self.margin(h, ranges / r_max)
-            available = np.array([m for m in MARGINS if (h, m) in self.index])
-            use = available[np.searchsorted(available, need)]
-            out[h] = [self.index[h, int(m)] for m in use]
+            out[h] = self.level_grids[h][np.searchsorted(self.level_margins[h], self.margin(h, ranges / r_max))]
         return out

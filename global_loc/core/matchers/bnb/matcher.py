@@ -69,7 +69,8 @@ class BranchAndBoundMatcher(Matcher):
         res = self.map.resolution
         points = points[np.hypot(points[:, 0], points[:, 1]) <= self.options.max_range]
         keys = np.floor(points / res).astype(np.int64)
-        _, first = np.unique(keys, axis=0, return_index=True)
+        keys -= keys.min(axis=0, initial=0)      # one integer per cell: np.unique on rows is ~7x slower
+        _, first = np.unique(keys[:, 0] * (int(keys[:, 1].max(initial=0)) + 1) + keys[:, 1], return_index=True)
         pts = points[np.sort(first)]
         if len(pts) > self.options.max_points:
             pts = pts[np.linspace(0, len(pts) - 1, self.options.max_points).astype(int)]
