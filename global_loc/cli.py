@@ -91,6 +91,10 @@ def localize_main(args) -> int:
                    success=result.success, confidence=round(result.confidence, 4),
                    time_s=round(result.time_s, 4), message=result.message,
                    hypotheses=[{**h.pose.as_dict(), 'score': round(h.score, 5)} for h in result.hypotheses])
+        stats = result.search_stats
+        if getattr(stats, 'search_s', None) is not None:     # bnb: what its search did, to tell why one was slow
+            out['search'] = {'expansions': stats.expansions, 'headings': stats.angles, 'points': stats.points,
+                             'search_s': round(stats.search_s, 4), 'exact': stats.exact}
         if truth is not None and result.pose is not None:
             d, a = pose_error(result.pose, truth)
             out.update(truth=truth.as_dict(), error_xy=round(d, 4), error_yaw_deg=round(a, 3))

@@ -56,9 +56,13 @@ def test_cli_bnb_options_are_flags(tmp_path):
     scans.write_text(sim.stdout)
     rows = [json.loads(line) for line in run_cli('localize', '--scans', str(scans)).stdout.splitlines()]
     assert [r['outcome'] for r in rows] == ['localized', 'localized']
+    # bnb's search statistics ride along; its search is part of the localization's time
+    assert all(r['search']['exact'] and r['search']['expansions'] > 50 and r['search']['headings'] > 0
+               and 0 < r['search']['search_s'] < r['time_s'] for r in rows)
     out = run_cli('localize', '--scans', str(scans), '--bnb-max-nodes', '50')
     assert out.returncode == 0, out.stderr
     rows = [json.loads(line) for line in out.stdout.splitlines()]
     assert [r['outcome'] for r in rows] == ['search_incomplete', 'search_incomplete']
     assert all('stopped after 50 node expansions' in r['message'] and not r['success'] for r in rows)
+    assert all(not r['search']['exact'] and r['search']['expansions'] >= 50 for r in rows)
     assert '--bnb-keep-ratio' in run_cli('localize', '--help').stdout
