@@ -63,6 +63,37 @@ def test_without_any_pose_it_relocalizes_after_the_start_delay_and_never_when_of
     assert off.on_fit(10.0, 0.0) == Health.LOST and off.should_relocalize(10.0) is None
 
 
+def test_a_published_pose_the_localizer_never_takes_is_retried_after_settle_s():
+    """The localizer (AMCL) was not up when the one /initialpose went out: after settle_s
+    without a pose from it the state is unknown again, and the guards let it retry."""
+    s = Supervisor(AUTO, now=0.0)
+    assert s.should_relocalize(2.5) == 'no pose from the localizer yet'
+    s.started_relocalization(2.5)
+    s.finished_relocalization(3.0, published=True, ambiguous=False)
+    assert s.health == Health.RELOCALIZING and s.should_relocalize(7.9) is None     # settling
+    assert s.should_relocalize(8.1) is None and s.health == Health.UNKNOWN        # expired; min_interval_s
+    assert 'took no pose' in s.note
+    assert s.should_relocalize(12.6) == 'no pose from the localizer yet'           # retried
+    s.started_relocalization(12.6)
+    s.finished_relocalization(13.0, published=True, ambiguous=False)
+    s.on_pose(14.0)                                           # this time it took it
+    assert s.should_relocalize(30.0) is None and s.health == Health.RELOCALIZING
+
+
+def test_no_attempt_is_made_or_counted_before_a_scan_has_arrived():
+    """A laser that starts 30 s late: no attempt before its first scan, and one that found
+    no scan (the laser stopped) is not counted against max_attempts."""
+    s = Supervisor(AUTO, now=0.0)
+    for t in range(3, 30):
+        assert s.should_relocalize(float(t), scan_arrived=False) is None
+    assert s.attempts == 0 and s.health == Health.UNKNOWN
+    assert s.should_relocalize(30.0, scan_arrived=True) == 'no pose from the localizer yet'
+    s.started_relocalization(30.0)
+    s.finished_relocalization(35.0, published=False, ambiguous=False, counted=False)   # NO_SCAN
+    assert s.attempts == 0 and s.health == Health.UNKNOWN
+    assert s.should_relocalize(35.1) == 'no pose from the localizer yet'
+
+
 def test_pose_history_interpolates_and_gives_the_motion_between_stamps():
     h = PoseHistory(keep_s=5.0)
     assert h.at(1.0) is None

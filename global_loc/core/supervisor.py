@@ -53,11 +53,26 @@ class Supervisor:
         self.last_attempt: Optional[float] = None
         self.running = False
         self.published_at: Optional[float] = None     # a relocalized pose waits for the localizer
+        self.last_pose_at: Optional[float] = None     # when the localizer last reported a pose
         self.note = ''
 
     def on_pose(self, now: float) -> None:
         """The localizer reported a pose (e.g. /amcl_pose)."""
         self.pose_received = True
+        self.last_pose_at = now
+
+    def _expire_settling(self, now: float) -> None:
+        """A published pose the localizer did not take within settle_s (it was not up yet,
+        or missed the one message): back to what the state was, so the guards may retry.
+        /initialpose is volatile, as AMCL subscribes it: a late subscriber never receives
+        an old pose, so retrying is the only way it gets one."""
+        c = self.config
+        if self.published_at is None or self.running or now - self.published_at < c.settle_s:
+            return
+        if self.last_pose_at is None or self.last_pose_at < self.published_at:
+            self.published_at = None
+            self.health = Health.LOST if self.pose_received else Health.UNKNOWN
+            self.note = f'the localizer took no pose within {c.settle_s:g} s of the one published; will retry'
 
     def on_fit(self, now: float, fit: float) -> Health:
         """The fit of a scan at the pose the localizer believes."""
@@ -83,10 +98,13 @@ class Supervisor:
             self.health = Health.DEGRADED
         return self.health
 
-    def should_relocalize(self, now: float) -> Optional[str]:
-        """Why a relocalization should start now, or None."""
+    def should_relocalize(self, now: float, scan_arrived: bool = True) -> Optional[str]:
+        """Why a relocalization should start now, or None. Never before a scan has arrived:
+        an attempt without one could only end 'no scan' and would use up max_attempts
+        while the laser is still starting."""
         c = self.config
-        if not c.auto_relocalize or self.running:
+        self._expire_settling(now)
+        if not c.auto_relocalize or self.running or not scan_arrived:
             return None
         if self.published_at is not None and now - self.published_at < c.settle_s:
             return None
@@ -107,12 +125,17 @@ class Supervisor:
         self.last_attempt = now
         self.health = Health.RELOCALIZING
 
-    def finished_relocalization(self, now: float, published: bool, ambiguous: bool) -> None:
-        """A relocalization ended; `published`: its pose went out (confident)."""
+    def finished_relocalization(self, now: float, published: bool, ambiguous: bool, counted: bool = True) -> None:
+        """A relocalization ended; `published`: its pose went out (confident). Not `counted`:
+        it never reached a scan (none arrived, the server stopped): not an attempt at all.
+        Whether the localizer took the pose is told by its next pose (on_pose), not assumed."""
         self.running = False
-        if published:
+        if not counted:
+            self.attempts -= 1
+            self.last_attempt = None
+            self.health = Health.LOST if self.pose_received else Health.UNKNOWN
+        elif published:
             self.published_at = now
             self.health = Health.RELOCALIZING
-            self.pose_received = True     # the localizer starts from it
         else:
             self.health = Health.AMBIGUOUS if ambiguous else Health.LOST

@@ -1,0 +1,78 @@
+"""One localization request, validated once and with every default resolved, whoever asked
+(an action goal, ~/trigger, nav2's ReinitializeGlobalLocalization, the health watch's own
+relocalization). The server builds it first and the rest of the path reads only it: what
+was asked cannot be re-interpreted further down.
+
+Each per-request quantity has the bounds of the server parameter that gives its default
+(a goal must not ask what the operator could not configure): `BOUNDS` is that one table,
+and ros/parameters.py declares the parameters' ranges from it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .localizer import check_angle_step
+from .matchers import resolve_method
+from .search_region import SearchRegion
+from .transform import Rigid2D
+
+# name -> (lowest, highest) for the request's fields and their parameters.
+BOUNDS = {
+    'scan_timeout_s': (0.1, 600.0),          # how long to wait for a scan after the request
+    'resolve_by_motion_s': (0.0, 600.0),     # how long an ambiguous answer may be followed
+    'search_radius_m': (0.0, 1e5),           # a prior's disc (0: anywhere); 100 km is any map
+    'search_yaw_tolerance_deg': (0.0, 180.0),  # a prior's heading window (0: any heading)
+}
+
+
+class RequestError(ValueError):
+    """The request cannot be served as asked; the message says which field and why."""
+
+
+@dataclass(frozen=True)
+class Request:
+    method: str                 # canonical matcher name
+    angle_step_deg: float       # Δα of the template matcher
+    scan_timeout_s: float
+    region: SearchRegion
+    resolve_by_motion_s: float = 0.0
+    rotate_in_place: bool = False
+    publish: bool = True
+    publish_if_ambiguous: bool = False
+    origin: str = 'goal'        # who asked: goal, trigger, reinitialize, relocalization
+
+
+@dataclass(frozen=True)
+class RequestDefaults:
+    """The server's current defaults for what a request leaves at 0 / empty."""
+    method: str
+    angle_step_deg: float
+    scan_timeout_s: float
+
+
+def check_bound(name: str, value: float) -> float:
+    lo, hi = BOUNDS[name]
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise RequestError(f'{name} must be in [{lo:g}, {hi:g}], got {value}')
+    return value
+
+
+def make_request(defaults: RequestDefaults, *, method: str = '', angle_step_deg: float = 0.0,
+                 timeout_s: float = 0.0, center: Rigid2D = Rigid2D(), radius_m: float = 0.0,
+                 yaw_tolerance_deg: float = 0.0, resolve_by_motion_s: float = 0.0, rotate_in_place: bool = False,
+                 publish: bool = True, publish_if_ambiguous: bool = False, origin: str = 'goal') -> Request:
+    """The request with 0 / '' replaced by the defaults and every field checked; RequestError
+    (naming the field) otherwise. An unknown method or one this OpenCV build lacks is one."""
+    try:
+        name = resolve_method(method or defaults.method)
+        step = check_angle_step(angle_step_deg or defaults.angle_step_deg)
+        region = SearchRegion(center, check_bound('search_radius_m', radius_m),
+                              math.radians(check_bound('search_yaw_tolerance_deg', yaw_tolerance_deg)))
+    except RequestError:
+        raise
+    except ValueError as e:      # MethodError, the angle step, a non-finite centre
+        raise RequestError(str(e)) from None
+    return Request(name, step, check_bound('scan_timeout_s', timeout_s or defaults.scan_timeout_s), region,
+                   check_bound('resolve_by_motion_s', resolve_by_motion_s), bool(rotate_in_place), bool(publish),
+                   bool(publish_if_ambiguous), origin)
