@@ -12,6 +12,8 @@ from global_loc.ros.convert import pose_from_msg, pose_to_msg
 from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, ros2, run_client, start_server, start_sim
 from global_loc.sim.simulator import BASE_T_LASER
 
+pytestmark = pytest.mark.ros   # real ROS processes (the compat run has no ROS: -m 'not ros')
+
 # Kidnap poses. The default matcher (bnb) finds the office's places; (18.0, 4.5, -2.2) is
 # one where the thesis's matcher ties twin rooms (0 of 6 right with 360 deg scans).
 KIDNAP_POSES = [Rigid2D(3.0, 4.0, 0.7), Rigid2D(20.0, 12.5, 2.5), Rigid2D(18.0, 4.5, -2.2)]

@@ -12,23 +12,17 @@ from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from nav_msgs.msg import OccupancyGrid
+from ros_helpers import TRUTH, localize, pose_of, start_scan_publisher
 from std_srvs.srv import Empty, Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from conftest import (
-    OFFICE_YAML,
-    REPO_ROOT,
-    TRUTH,
-    assert_pose_near,
-    localize,
-    pose_of,
-    start_scan_publisher,
-    symmetric_room,
-)
+from conftest import OFFICE_YAML, REPO_ROOT, assert_pose_near, symmetric_room
 from global_loc.core.map_io import save_map_yaml
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import pose_from_msg
 from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, start_client, start_server
+
+pytestmark = pytest.mark.ros   # real ROS processes (the compat run has no ROS: -m 'not ros')
 
 PARAMS_FILE = os.path.join(REPO_ROOT, 'config', 'global_loc.yaml')
 

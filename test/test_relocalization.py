@@ -17,6 +17,8 @@ from global_loc.ros.convert import pose_from_msg, pose_to_msg, pose_with_covaria
 from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, run_client, start_server, start_sim
 from global_loc.sim.simulator import BASE_T_LASER
 
+pytestmark = pytest.mark.ros   # real ROS processes (the compat run has no ROS: -m 'not ros')
+
 LASER_X = f'laser_x:={BASE_T_LASER.x}'
 
 

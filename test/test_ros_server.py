@@ -6,8 +6,9 @@ import time
 
 import pytest
 from geometry_msgs.msg import PoseWithCovarianceStamped
+from ros_helpers import TRUTH, localize, pose_of, start_scan_publisher
 
-from conftest import OFFICE_YAML, TRUTH, assert_pose_near, localize, pose_of, start_scan_publisher, symmetric_room
+from conftest import OFFICE_YAML, assert_pose_near, symmetric_room
 from global_loc.core.outcome import Outcome
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import pose_from_msg
@@ -19,6 +20,8 @@ from global_loc.ros.processes import (
     start_client,
     start_server,
 )
+
+pytestmark = pytest.mark.ros   # real ROS processes (the compat run has no ROS: -m 'not ros')
 
 
 def initialpose_listener(env) -> TopicRecorder:

@@ -9,9 +9,12 @@ import subprocess
 import time
 
 import pytest
+from ros_helpers import TRUTH, start_scan_publisher
 
-from conftest import OFFICE_YAML, TRUTH, start_scan_publisher
+from conftest import OFFICE_YAML
 from global_loc.ros.processes import isolated_env, start_client, start_server, start_sim
+
+pytestmark = pytest.mark.ros   # real ROS processes (the compat run has no ROS: -m 'not ros')
 
 # Generous against a loaded CI machine; the soak benchmark measures the real figure.
 EXIT_WITHIN_S = 5.0
