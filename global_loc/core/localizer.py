@@ -13,6 +13,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from .limits import ANGLE_STEP_DEG, check_within
 from .map_io import OccupancyMap
 from .matchers import BranchAndBoundOptions, MatchOptions, make_matcher, resolve_method
 from .matchers.base import ProgressFn, distinct
@@ -23,10 +24,8 @@ from .transform import Rigid2D, covariance_of_composition
 
 
 def check_angle_step(angle_step_deg: float) -> float:
-    """The rotated-template matcher's Δα must lie in (0, 180] degrees; ValueError otherwise."""
-    if not (0 < angle_step_deg <= 180):
-        raise ValueError(f'angle step must be in (0, 180] degrees, got {angle_step_deg}')
-    return angle_step_deg
+    """The rotated-template matcher's Δα within limits.ANGLE_STEP_DEG; ValueError otherwise."""
+    return check_within('angle step', angle_step_deg, ANGLE_STEP_DEG, 'degrees')
 
 
 @dataclass

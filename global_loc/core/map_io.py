@@ -6,8 +6,10 @@ the map's GridFrame (core/grid_frame.py).
 """
 from __future__ import annotations
 
+import errno
 import math
 import os
+import stat
 from dataclasses import dataclass
 
 import cv2
@@ -15,6 +17,7 @@ import numpy as np
 import yaml
 
 from .grid_frame import GridFrame
+from .limits import MAP_RESOLUTION_M, MAX_MAP_CELLS
 from .transform import Rigid2D
 
 OCCUPIED = 100
@@ -103,8 +106,8 @@ def from_occupancy_grid(width, height, resolution, origin, data, source='<Occupa
         raise MapError(f'{source}: bad width/height/resolution: {e}') from None
     if width <= 0 or height <= 0:
         raise MapError(f'{source}: empty grid ({width} x {height})')
-    if not math.isfinite(resolution) or resolution <= 0:
-        raise MapError(f'{source}: resolution must be a positive number, got {resolution}')
+    check_resolution(resolution, source)
+    check_cells(width, height, source)
     grid = np.asarray(data)
     if grid.size != width * height:
         raise MapError(f'{source}: data has {grid.size} cells, expected {width} x {height} = {width * height}')
@@ -119,6 +122,26 @@ def from_occupancy_grid(width, height, resolution, origin, data, source='<Occupa
     return make_map(np.flipud(grid).astype(np.int8), resolution, origin, source)
 
 
+def check_resolution(resolution: float, source: str) -> float:
+    """The cell size if it lies in limits.MAP_RESOLUTION_M; MapError otherwise (a cell of
+    1e-8 m makes bnb divide by zero, one of 1e-6 m a huge search - every goal would fail)."""
+    lo, hi = MAP_RESOLUTION_M
+    if not (math.isfinite(resolution) and resolution > 0):
+        raise MapError(f'{source}: resolution must be a positive number, got {resolution}')
+    if not lo <= resolution <= hi:
+        why = 'a cell finer than any laser resolves' if resolution < lo else 'one cell would hold a whole room'
+        raise MapError(f'{source}: resolution {resolution:g} m is outside [{lo:g}, {hi:g}] m ({why})')
+    return resolution
+
+
+def check_cells(width: int, height: int, source: str) -> None:
+    """MapError for a map of more than limits.MAX_MAP_CELLS cells (its precomputation
+    would take gigabytes), checked before its cells are copied or converted."""
+    if width * height > MAX_MAP_CELLS:
+        raise MapError(f'{source}: {width} x {height} = {width * height} cells, more than the {MAX_MAP_CELLS} a '
+                       f'map may have (bnb precomputes ~23 bytes a cell); crop it or use a coarser resolution')
+
+
 def check_origin(origin, source: str):
     """The map origin (x, y, yaw) if it has three values, every one finite; MapError
     otherwise (a NaN origin would put every pose the matchers return at NaN)."""
@@ -127,6 +150,30 @@ def check_origin(origin, source: str):
     if not all(math.isfinite(v) for v in origin):
         raise MapError(f'{source}: origin must be finite numbers (x, y, yaw), got {list(origin)}')
     return origin
+
+
+def check_regular_file(path: str, source: str, what: str) -> None:
+    """MapError unless `path` is a readable regular file (or a symlink to one), saying
+    what it is instead: missing, a dangling symlink, a symlink loop, a directory, a FIFO
+    (opening one would block), a device or a socket - not just "not found"."""
+    prefix = f'{source}: {what}' if what != source else source
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as e:
+        if e.errno == errno.ELOOP:
+            raise MapError(f'{prefix} is a symlink loop (it never reaches a file)') from None
+        if os.path.islink(path):
+            raise MapError(f'{prefix} is a symlink to {os.readlink(path)!r}, which does not exist') from None
+        if e.errno == errno.ENOENT:
+            raise MapError(f'{prefix} not found') from None
+        raise MapError(f'{prefix} cannot be accessed: {e.strerror}') from None
+    kinds = [(stat.S_ISDIR, 'a directory'), (stat.S_ISFIFO, 'a FIFO (named pipe)'),
+             (stat.S_ISCHR, 'a character device'), (stat.S_ISBLK, 'a block device'), (stat.S_ISSOCK, 'a socket')]
+    for is_kind, kind in kinds:
+        if is_kind(mode):
+            raise MapError(f'{prefix} is {kind}, not a file')
+    if not os.access(path, os.R_OK):
+        raise MapError(f'{prefix} is not readable (permission denied)')
 
 
 def _require(doc, key, path):
@@ -140,8 +187,7 @@ def load_map_yaml(path) -> OccupancyMap:
     relative to the YAML, `negate`, `occupied_thresh`, `free_thresh`, `mode`
     (trinary | scale | raw), `origin` [x, y, yaw]; colour images are averaged to grey."""
     path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise MapError(f'{path}: map YAML not found')
+    check_regular_file(path, path, 'map YAML')
     try:
         with open(path) as f:
             doc = yaml.safe_load(f)
@@ -164,8 +210,7 @@ def load_map_yaml(path) -> OccupancyMap:
     except (TypeError, ValueError) as e:
         raise MapError(f'{path}: bad value: {e}') from None
     mode = doc.get('mode', 'trinary')
-    if not math.isfinite(resolution) or resolution <= 0:
-        raise MapError(f'{path}: resolution must be a positive number, got {resolution}')
+    check_resolution(resolution, path)
     check_origin(origin, path)
     if not (0.0 <= free_th < occ_th <= 1.0):
         raise MapError(f'{path}: need 0 <= free_thresh < occupied_thresh <= 1, '
@@ -177,13 +222,11 @@ def load_map_yaml(path) -> OccupancyMap:
 
     image_path = image_name if os.path.isabs(image_name) else \
         os.path.join(os.path.dirname(os.path.abspath(path)), image_name)
-    if os.path.isdir(image_path):
-        raise MapError(f'{path}: image {image_path} is a directory, not an image file')
-    if not os.path.isfile(image_path):
-        raise MapError(f'{path}: image {image_path} not found')
+    check_regular_file(image_path, path, f'image {image_path}')
     image = cv2.imread(image_path, cv2.IMREAD_UNCHANGED)
     if image is None or image.size == 0:
         raise MapError(f'{path}: image {image_path} could not be read')
+    check_cells(image.shape[1], image.shape[0], path)    # before the per-cell float conversions below
     if image.dtype != np.uint8:   # 16-bit PGM/PNG: scale to 8 bits as map_server's 0..255 shade
         image = (image.astype(np.float64) / np.iinfo(image.dtype).max * 255.0).round().astype(np.uint8)
     alpha = None

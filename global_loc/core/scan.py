@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Optional
 
 import numpy as np
 
@@ -26,6 +27,10 @@ class Scan:
     range_max: float
     ranges: np.ndarray
     stamp: float = 0.0      # seconds; the ROS node keeps the message stamp itself
+    # The LaserScan's angle_max, checked against angle_min + (n - 1) x angle_increment (a
+    # filter that flipped one field mirrors the scan); None: not known (CARMEN logs, JSON
+    # lines without it).
+    angle_max: Optional[float] = None
 
     @staticmethod
     def from_dict(d: dict) -> 'Scan':
@@ -35,8 +40,10 @@ class Scan:
             raise ScanError(f'scan is missing field(s): {", ".join(missing)}')
         try:
             ranges = np.array([np.nan if r is None else r for r in d['ranges']], dtype=float)
+            angle_max = d.get('angle_max')
             return Scan(float(d['angle_min']), float(d['angle_increment']), float(d['range_min']),
-                        float(d['range_max']), ranges, float(d.get('stamp', 0.0)))
+                        float(d['range_max']), ranges, float(d.get('stamp', 0.0)),
+                        None if angle_max is None else float(angle_max))
         except (TypeError, ValueError) as e:
             raise ScanError(f'scan has a non-numeric field: {e}') from None
 
@@ -45,9 +52,12 @@ class Scan:
         return self.angle_min + self.angle_increment * np.arange(np.asarray(self.ranges).size)
 
     def to_dict(self) -> dict:
-        return {'angle_min': self.angle_min, 'angle_increment': self.angle_increment,
-                'range_min': self.range_min, 'range_max': self.range_max,
-                'ranges': [None if not math.isfinite(r) else round(float(r), 4) for r in self.ranges]}
+        out = {'angle_min': self.angle_min, 'angle_increment': self.angle_increment,
+               'range_min': self.range_min, 'range_max': self.range_max,
+               'ranges': [None if not math.isfinite(r) else round(float(r), 4) for r in self.ranges]}
+        if self.angle_max is not None:
+            out['angle_max'] = self.angle_max
+        return out
 
 
 @dataclass
@@ -83,6 +93,7 @@ def scan_to_points(scan: Scan) -> ScanPoints:
     if not np.isfinite(angles).all():
         raise ScanError(f'beam angles overflow: angle_min {scan.angle_min} + i x angle_increment '
                         f'{scan.angle_increment} is not finite for every beam')
+    check_angle_max(scan, float(angles[-1]))
     nan = np.isnan(ranges)
     inf = np.isinf(ranges)
     finite = ~(nan | inf)
@@ -99,6 +110,24 @@ def scan_to_points(scan: Scan) -> ScanPoints:
     # -inf is "too close to measure" (REP 117), NaN unknown: neither says the beam's path is free.
     no_return = (inf & (ranges > 0)) | high
     return ScanPoints(pts, float(scan.range_max), int(ranges.size), dropped, angles[no_return])
+
+
+def check_angle_max(scan: Scan, last_angle: float) -> None:
+    """ScanError when the scan states an angle_max more than one increment away from its
+    last beam's angle: the fields contradict each other (an increment whose sign was
+    flipped gives a mirrored scan, confidently wrong), and which is right is unknown.
+    One increment of slack: drivers differ on whether angle_max is the last beam's angle
+    or one step past it."""
+    if scan.angle_max is None:
+        return
+    if not math.isfinite(scan.angle_max):
+        raise ScanError(f'scan field angle_max is not finite: {scan.angle_max}')
+    off = abs(scan.angle_max - last_angle)
+    if off > abs(scan.angle_increment) * (1 + 1e-6) + 1e-9:
+        raise ScanError(f'scan angle_max {scan.angle_max:.6g} disagrees with angle_min + (n - 1) x angle_increment '
+                        f'= {scan.angle_min:.6g} + {len(scan.ranges) - 1} x {scan.angle_increment:.6g} = '
+                        f'{last_angle:.6g} by {off:.3g} rad, more than one increment: the fields contradict '
+                        f'each other (a flipped angle_increment mirrors the scan)')
 
 
 def count_distinct_up_to_3(rows: np.ndarray) -> int:

@@ -25,7 +25,7 @@ def stamp_seconds(stamp) -> float:
 
 def scan_from_msg(msg: LaserScan) -> Scan:
     return Scan(msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max,
-                np.asarray(msg.ranges, dtype=float), stamp_seconds(msg.header.stamp))
+                np.asarray(msg.ranges, dtype=float), stamp_seconds(msg.header.stamp), msg.angle_max)
 
 
 def scan_to_msg(scan: Scan, frame_id: str, stamp, scan_time: float = 0.0) -> LaserScan:

@@ -1,0 +1,108 @@
+"""Issue 24 items 5-9 in the core: per-goal quantities within their parameters' bounds and
+a stated budget, scans whose fields contradict each other, upside-down lasers, priors
+tighter than the search's resolution, absurd map resolutions, map paths that are not files."""
+import math
+import os
+
+import numpy as np
+import pytest
+
+from global_loc.core import limits
+from global_loc.core.map_io import MapError, from_occupancy_grid, load_map_yaml, make_map, save_map_yaml
+from global_loc.core.scan import Scan, ScanError, scan_to_points
+from global_loc.core.transform import Rigid2D
+
+
+def fan(n=181, angle_min=-math.pi / 2, increment=math.pi / 180, angle_max='consistent'):
+    """A scan of n beams at 2 m; angle_max as the fields imply, or as given."""
+    last = angle_min + (n - 1) * increment
+    return Scan(angle_min, increment, 0.05, 10.0, np.full(n, 2.0),
+                angle_max=last if angle_max == 'consistent' else angle_max)
+
+
+# ---- item 6: a scan's angle_max must agree with its other fields ----------------------------
+def test_a_mirrored_scan_is_refused_with_the_reason():
+    """A filter that flipped angle_increment's sign: angle_min -pi/2, angle_max +pi/2, increment < 0."""
+    mirrored = Scan(-math.pi / 2, -math.pi / 180, 0.05, 10.0, np.full(181, 2.0), angle_max=math.pi / 2)
+    with pytest.raises(ScanError, match='angle_max .* disagrees .* more than one increment'):
+        scan_to_points(mirrored)
+
+
+@pytest.mark.parametrize('off_by_increments', [0.0, 1.0, -1.0, 0.5])
+def test_angle_max_within_one_increment_is_accepted(off_by_increments):
+    """Drivers differ on whether angle_max is the last beam's angle or one step past it."""
+    inc = math.pi / 180
+    scan = fan(angle_max=-math.pi / 2 + 180 * inc + off_by_increments * inc)
+    assert len(scan_to_points(scan).points) == 181
+
+
+@pytest.mark.parametrize('angle_max', [math.pi / 2 + 2.5 * math.pi / 180, 0.0, math.nan, math.inf])
+def test_angle_max_off_by_more_than_one_increment_or_not_finite_is_refused(angle_max):
+    with pytest.raises(ScanError, match='angle_max'):
+        scan_to_points(fan(angle_max=angle_max))
+
+
+def test_angle_max_unknown_is_not_checked_and_survives_json():
+    assert len(scan_to_points(fan(angle_max=None)).points) == 181
+    assert Scan.from_dict(fan(angle_max=None).to_dict()).angle_max is None
+    assert Scan.from_dict(fan().to_dict()).angle_max == pytest.approx(math.pi / 2)
+    with pytest.raises(ScanError, match='angle_max'):
+        scan_to_points(Scan.from_dict({**fan().to_dict(), 'angle_max': -1.0}))
+
+
+# ---- item 8: absurd map resolutions and sizes refused at load ------------------------------
+ABSURD_RESOLUTIONS = [1e-12, 1e-8, 1e-6, 0.0, -0.05, 1e6, math.inf, math.nan]
+
+
+@pytest.mark.parametrize('resolution', ABSURD_RESOLUTIONS)
+def test_an_absurd_resolution_is_refused_from_an_occupancy_grid(resolution):
+    with pytest.raises(MapError, match='resolution'):
+        from_occupancy_grid(10, 10, resolution, (0.0, 0.0, 0.0), np.zeros(100))
+
+
+@pytest.mark.parametrize('resolution', ABSURD_RESOLUTIONS)
+def test_an_absurd_resolution_is_refused_from_yaml(tmp_path, resolution):
+    path = tmp_path / 'm.yaml'
+    save_map_yaml(make_map(np.zeros((10, 10), np.int8), 0.05, Rigid2D()), path)
+    path.write_text(path.read_text().replace('resolution: 0.05', f'resolution: {resolution}'))
+    with pytest.raises(MapError, match='resolution'):
+        load_map_yaml(path)
+
+
+@pytest.mark.parametrize('resolution', [limits.MAP_RESOLUTION_M[0], 0.05, limits.MAP_RESOLUTION_M[1]])
+def test_resolutions_within_the_bounds_load(resolution):
+    assert from_occupancy_grid(10, 10, resolution, (0.0, 0.0, 0.0), np.zeros(100)).resolution == resolution
+
+
+def test_a_grid_of_too_many_cells_is_refused_before_its_data_is_read():
+    side = int(math.isqrt(limits.MAX_MAP_CELLS)) + 1
+    with pytest.raises(MapError, match='cells, more than'):   # data is never touched: its size is wrong too
+        from_occupancy_grid(side, side, 0.05, (0.0, 0.0, 0.0), np.zeros(1))
+
+
+# ---- item 9: a map path that is not a regular file says what it is ------------------------
+def test_map_yaml_that_is_a_directory_a_symlink_loop_or_a_device_says_so(tmp_path):
+    os.symlink(tmp_path / 'b', tmp_path / 'a')
+    os.symlink(tmp_path / 'a', tmp_path / 'b')
+    os.mkfifo(tmp_path / 'fifo')
+    os.symlink(tmp_path / 'nowhere', tmp_path / 'dangling')
+    cases = {str(tmp_path): 'is a directory', str(tmp_path / 'a'): 'is a symlink loop',
+             '/dev/null': 'is a character device', str(tmp_path / 'fifo'): r'is a FIFO \(named pipe\)',
+             str(tmp_path / 'dangling'): "is a symlink to .*nowhere', which does not exist",
+             str(tmp_path / 'missing.yaml'): 'not found'}
+    for path, says in cases.items():
+        with pytest.raises(MapError, match=says):
+            load_map_yaml(path)
+
+
+def test_map_image_that_is_a_fifo_or_a_loop_says_so(tmp_path):
+    path = tmp_path / 'm.yaml'
+    save_map_yaml(make_map(np.zeros((10, 10), np.int8), 0.05, Rigid2D()), path)
+    os.remove(tmp_path / 'm.pgm')
+    os.mkfifo(tmp_path / 'm.pgm')
+    with pytest.raises(MapError, match=r'image .*m.pgm is a FIFO'):
+        load_map_yaml(path)
+    os.remove(tmp_path / 'm.pgm')
+    os.symlink(tmp_path / 'm.pgm', tmp_path / 'm.pgm')
+    with pytest.raises(MapError, match=r'image .*m.pgm is a symlink loop'):
+        load_map_yaml(path)
