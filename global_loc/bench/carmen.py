@@ -4,13 +4,17 @@ from them, for the benchmark's held-out localization (no ROS).
 FLASER n r1..rn x y theta odom_x odom_y odom_theta ipc_timestamp hostname logger_timestamp:
 beams from -pi/2 counter-clockwise (1 deg for 180/181 beams, 0.5 deg for 360/361),
 `x y theta` the SLAM-corrected laser pose, a reading within 1% of the log's maximum
-value meaning "no return".
+value meaning "no return". The FLASER odom fields equal the corrected pose in these logs
+(the truth); the raw odometry is in the ODOM records (`ODOM x y theta tv rv accel ...`):
+the one after a FLASER repeats its corrected pose, later ones move that pose by the raw
+odometry, so the raw motion from scan k-1 to scan k is corrected[k-1]^-1 * (the last ODOM
+pose before FLASER k).
 """
 from __future__ import annotations
 
 import gzip
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -26,30 +30,39 @@ class LaserRecord:
     scan: Scan
     pose: Rigid2D          # corrected laser pose
     timestamp: float
+    odometry: Rigid2D = field(default_factory=Rigid2D)   # laser pose by the raw odometry alone (its own frame)
 
 
 def read_flaser(path: str) -> list[LaserRecord]:
-    """All FLASER records of a (gzipped) CARMEN log, in file order."""
+    """All FLASER records of a (gzipped) CARMEN log, in file order, each with its raw odometry."""
     opener = gzip.open if path.endswith('.gz') else open
-    raw = []
+    raw, odom = [], None            # odom: the last ODOM pose read
     with opener(path, 'rt') as f:
         for line in f:
+            if line.startswith('ODOM '):
+                odom = Rigid2D(*(float(v) for v in line.split()[1:4]))
             if not line.startswith('FLASER '):
                 continue
             parts = line.split()
             n = int(parts[1])
             ranges = np.array(parts[2:2 + n], dtype=float)
             x, y, theta = (float(v) for v in parts[2 + n:5 + n])
-            raw.append((ranges, Rigid2D(x, y, theta), float(parts[8 + n])))
+            raw.append((ranges, Rigid2D(x, y, theta), float(parts[8 + n]), odom))
+            odom = None
     if not raw:
         raise ValueError(f'{path}: no FLASER records')
-    max_reading = max(float(r.max()) for r, _, _ in raw)
+    max_reading = max(float(r.max()) for r, _, _, _ in raw)
     range_max = 0.99 * max_reading            # at or above: no return (dropped by scan_to_points)
     records = []
-    for ranges, pose, stamp in raw:
+    for ranges, pose, stamp, odom in raw:
         n = len(ranges)
         increment = math.radians(1.0) if n <= 181 else math.radians(0.5)
-        records.append(LaserRecord(Scan(-math.pi / 2, increment, 0.0, range_max, ranges, stamp), pose, stamp))
+        odometry = Rigid2D()
+        if records:     # no ODOM since the last scan: no motion measured
+            previous = records[-1]
+            odometry = previous.odometry * (previous.pose.inverse() * odom if odom is not None else Rigid2D())
+        records.append(LaserRecord(Scan(-math.pi / 2, increment, 0.0, range_max, ranges, stamp), pose, stamp,
+                                   odometry))
     return records
 
 

@@ -5,7 +5,7 @@ the server runs: Localizer, MotionResolver, Supervisor).
 - Kidnap and turn: the robot is put at a seeded free pose; one scan is localized; when
   the answer is ambiguous the robot turns in place (0.4 rad/s, one turn at most) and the
   hypotheses are followed with odometry until one wins (else the turn's scans, fused into
-  one view, are searched again). Single-scan vs resolved success,
+  one view, are searched again): core.motion.HypothesisFollower, the server's loop. Single-scan vs resolved success,
   confident-but-wrong for both, the angle turned until confident.
 - Watch: the robot circles in the map's most open spot with the localizer's pose correct
   (the truth): lost alarms per hour. Then it is kidnapped while the believed pose stays
@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from ..core.localizer import Localizer
-from ..core.motion import MotionConfig, MotionResolver, pose_fitter, settle
+from ..core.motion import HypothesisFollower, Observation, pose_fitter
 from ..core.outcome import Outcome
 from ..core.scan import scan_to_points
 from ..core.supervisor import Health, Supervisor, SupervisorConfig
@@ -32,6 +32,17 @@ TURN_RATE = 0.4       # rad/s, the server's default rotate_speed
 HEALTH_PERIOD = 0.5   # s
 
 
+def turning_observations(sim, follower: HypothesisFollower, t0: float):
+    """Scans of a turn in place, one per tick, with the wheel odometry at each: until the
+    odometry says one full turn (as the server's rotate-in-place; a stuck robot: 1.5 x
+    the ticks a turn takes)."""
+    for k in range(1, int(1.5 * 2 * math.pi / TURN_RATE / TICK)):
+        if follower.turned >= 2 * math.pi:
+            return
+        sim.drive(0.0, TURN_RATE, TICK)
+        yield Observation(scan_to_points(sim.scan()), sim.odom, t0 + k * TICK)
+
+
 def kidnap_and_turn(name, m, localizer, sim, pose) -> dict:
     sim.place(pose)
     result = localizer.localize(sim.scan(), base_T_laser=BASE_T_LASER)
@@ -41,23 +52,12 @@ def kidnap_and_turn(name, m, localizer, sim, pose) -> dict:
     row['resolved_success'], row['resolved_ok'] = row['single_success'], row['single_ok']
     if result.outcome != Outcome.AMBIGUOUS:
         return row
-    matcher, c = localizer.matcher('bnb'), localizer.config.bnb
-    resolver = MotionResolver([h.pose for h in result.hypotheses], MotionConfig.for_matcher(c))
-    winner, seen = None, []
-    for k in range(int(2 * math.pi / TURN_RATE / TICK)):
-        before = sim.odom
-        sim.drive(0.0, TURN_RATE, TICK)
-        points = scan_to_points(sim.scan())
-        seen.append((sim.odom * BASE_T_LASER, points))
-        leader = resolver.update(before.inverse() * sim.odom, pose_fitter(matcher, points, BASE_T_LASER))
-        if leader is not None and k % int(1.0 / TICK) == 0:       # as the server: a check at most once a second
-            winner = settle(localizer, seen, BASE_T_LASER, leader.pose)
-            if winner is not None:
-                break
+    follower = HypothesisFollower(result, localizer, BASE_T_LASER, sim.odom, 0.0)   # the server's loop
+    follower.follow(turning_observations(sim, follower, 0.0))
     sim.drive(0.0, 0.0, TICK)
-    winner = winner or settle(localizer, seen, BASE_T_LASER)
-    pose = None if winner is None else winner.pose
-    row.update(turned_deg=round(math.degrees(resolver.turned), 1), resolved_success=pose is not None,
+    outcome = follower.finish()
+    pose = outcome.result.pose if outcome.settled else None
+    row.update(turned_deg=round(math.degrees(outcome.turned_rad), 1), resolved_success=pose is not None,
                resolved_ok=bool(pose is not None and pose_correct(pose, sim.true_pose())))
     return row
 

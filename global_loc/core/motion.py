@@ -9,15 +9,23 @@ number of scans, far slower than a real lead. The leader wins once the scans see
 way, fused into one odometry-aligned view and searched over the whole map, confidently
 agree (`settle`); without a leader the fused view alone may settle it. A view that never
 tells the places apart (a perfectly symmetric room) never lets one win.
+
+`HypothesisFollower` is that loop over a stream of observations (points, odometry at
+the scan's stamp, stamp): the server feeds it scans as they arrive, `localize --follow`
+a bag or a CARMEN log, the relocalization benchmark the simulator. It keeps time by the
+scans' stamps, never the wall clock, so an offline run is reproducible.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Callable, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
+from .localizer import Hypothesis, LocalizationResult
 from .scan import ScanPoints
 from .transform import Rigid2D, pose_correct
 
@@ -120,3 +128,96 @@ def settle(localizer, seen: list[tuple[Rigid2D, ScanPoints]], base_T_laser: Rigi
     if not fused.success or (candidate is not None and not pose_correct(fused.pose, candidate)):
         return None
     return fused
+
+
+# Following uses bnb whatever method answered the single scan: the per-scan fit (fit_at,
+# a refinement within a cell on bnb's precomputed field) has no counterpart in the thesis
+# matchers, and `settle` searches the whole map about once a second while the robot moves,
+# which only bnb does in tens of milliseconds; the lead a winner needs is bnb's margin.
+FOLLOW_METHOD = 'bnb'
+SETTLE_PERIOD_S = 1.0     # scan time between two searches of the fused view (a search each: not every scan)
+
+
+@dataclass(frozen=True)
+class Observation:
+    points: ScanPoints        # the scan, laser frame
+    odometry: Rigid2D         # robot base in the odometry frame at the scan's stamp
+    stamp: float              # s, the scan's own stamp
+    source: Any = None        # what the caller wants back with the outcome (a LaserScan message, a log index)
+
+
+@dataclass
+class FollowOutcome:
+    settled: bool
+    result: LocalizationResult     # the winner (LOCALIZED), or the result still ambiguous with the hypotheses left
+    travelled_m: float             # by the odometry, until settled or the end
+    turned_rad: float
+    elapsed_s: float               # scan time from the start scan to the last one used
+    scans: int                     # observations used
+    last: Optional[Observation]    # the last one used: the poses are the robot's at its stamp (None: none came)
+
+
+class HypothesisFollower:
+    """Follows an ambiguous result's hypotheses from the start scan (its odometry and
+    stamp) over the observations given to `observe`; `finish` says how it ended."""
+
+    def __init__(self, result: LocalizationResult, localizer, base_T_laser: Rigid2D, start_odometry: Rigid2D,
+                 start_stamp: float, config: Optional[MotionConfig] = None):
+        self.result, self.localizer, self.base_T_laser = result, localizer, base_T_laser
+        self.matcher = localizer.matcher(FOLLOW_METHOD)
+        self.resolver = MotionResolver([h.pose for h in result.hypotheses],
+                                       config or MotionConfig.for_matcher(self.matcher.options))
+        self.odometry, self.start_stamp = start_odometry, start_stamp
+        self.seen: list[tuple[Rigid2D, ScanPoints]] = []    # (laser pose in the odometry frame, points)
+        self.checked = -math.inf
+        self.winner: Optional[LocalizationResult] = None
+        self.last: Optional[Observation] = None
+
+    @property
+    def turned(self) -> float:
+        return self.resolver.turned
+
+    def observe(self, obs: Observation) -> bool:
+        """One more scan: move the hypotheses by the odometry since the last one, score it
+        at each; when one leads, the fused view is searched (at most once a second of scan
+        time). Whether a winner has settled."""
+        motion, self.odometry, self.last = self.odometry.inverse() * obs.odometry, obs.odometry, obs
+        self.seen.append((obs.odometry * self.base_T_laser, obs.points))
+        leader = self.resolver.update(motion, pose_fitter(self.matcher, obs.points, self.base_T_laser))
+        if leader is not None and obs.stamp - self.checked >= SETTLE_PERIOD_S:
+            self.checked = obs.stamp
+            self.winner = settle(self.localizer, self.seen, self.base_T_laser, leader.pose)
+        return self.winner is not None
+
+    def follow(self, observations: Iterable[Observation],
+               on_step: Optional[Callable[['HypothesisFollower'], None]] = None) -> bool:
+        """`observe` each observation until one settles or they end (an iterator may raise
+        Cancelled: it goes through), `on_step` after each; whether one settled. Then `finish`."""
+        for obs in observations:
+            settled = self.observe(obs)
+            if on_step is not None:
+                on_step(self)
+            if settled:
+                return True
+        return False
+
+    def finish(self, search_fused: bool = True) -> FollowOutcome:
+        """The outcome: the winner; or, without one, the scans seen fused and searched once
+        more (unless `search_fused` is False: a cancelled request); or still ambiguous."""
+        r = self.resolver
+        winner, how = self.winner, 'one place led and the scans seen, fused into one view, confirm it'
+        if winner is None and search_fused:
+            winner = settle(self.localizer, self.seen, self.base_T_laser)
+            how = 'the scans seen, fused into one view, match one place'
+        hypotheses = [Hypothesis(t.pose, t.evidence) for t in r.tracks]
+        moved = f'{r.travelled:.2f} m and {math.degrees(r.turned):.0f} deg'
+        elapsed = self.last.stamp - self.start_stamp if self.last is not None else 0.0
+        if winner is None:
+            result = dataclasses.replace(
+                self.result, hypotheses=hypotheses, pose=hypotheses[0].pose if hypotheses else None,
+                message=f'ambiguous after {elapsed:.0f} s of motion ({moved}): {len(hypotheses)} place(s) still '
+                        f'match; see the hypotheses')
+        else:
+            result = dataclasses.replace(winner, hypotheses=[Hypothesis(winner.pose, winner.score)] + hypotheses[1:],
+                                         message=f'localized by motion after {moved}: {how}')
+        return FollowOutcome(winner is not None, result, r.travelled, r.turned, elapsed, len(self.seen), self.last)

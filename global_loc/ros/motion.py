@@ -1,75 +1,73 @@
-"""Settling an ambiguous answer by motion inside a localization request: the hypotheses
-are followed with odometry and scored on every new scan (core.motion.MotionResolver)
-while the robot moves - driven by someone else, or turned in place by the server itself
-(one slow turn on cmd_vel, stopped with a zero twist however the request ends)."""
+"""Settling an ambiguous answer by motion inside a localization request: the scans that
+arrive while the robot moves - driven by someone else, or turned in place by the server
+itself (one turn by the odometry, stopped with a zero twist however the request ends) -
+fed to the core's hypothesis follower (core.motion.HypothesisFollower) with the odometry
+at each scan's stamp. The collaborators are passed in; nothing here reads a node."""
 from __future__ import annotations
 
 import dataclasses
 import math
 import time
+from typing import Callable
 
 from geometry_msgs.msg import Twist, Vector3
 
-from ..core.localizer import Hypothesis, LocalizationResult
-from ..core.motion import MotionConfig, MotionResolver, pose_fitter, settle
+from ..core.localizer import LocalizationResult
+from ..core.motion import HypothesisFollower, Observation
+from ..core.pose_history import PoseHistory
 from ..core.scan import ScanError, scan_to_points
+from ..core.scan_waiter import ScanWaiter
 from ..core.transform import Rigid2D
 from .convert import scan_from_msg, stamp_seconds
 
+ODOMETRY_GRACE_S = 2.0     # a moment for a late first odometry message
 
-def resolve_by_motion(node, goal, result: LocalizationResult, first_scan, base_T_laser: Rigid2D, cancelled,
-                      feedback) -> tuple[LocalizationResult, object]:
-    """Follow `result`'s hypotheses for up to goal.resolve_by_motion_s: (the winner as a
-    localized result, or the result still ambiguous with the hypotheses left; the last
-    scan message used - the poses are the robot's at its stamp)."""
-    odom = node.odom.wait_after(0.0, 2.0, cancelled)      # any odometry; a moment for a late first one
-    if odom is None:
-        return dataclasses.replace(result, message=f'{result.message} (no odometry on {node.settings.odom_topic}: '
-                                                   f'cannot resolve by motion)'), first_scan
-    matcher = node.localizer.matcher('bnb')
-    resolver = MotionResolver([h.pose for h in result.hypotheses], MotionConfig.for_matcher(matcher.options))
-    start = time.monotonic()
-    deadline = start + goal.resolve_by_motion_s
-    last_stamp, since = stamp_seconds(first_scan.header.stamp), start
-    node.get_logger().info(f'resolving by motion: {len(resolver.tracks)} hypotheses, up to '
-                           f'{goal.resolve_by_motion_s:.0f} s' + (', turning in place' if goal.rotate_in_place else ''))
-    winner, leader, seen, checked = None, None, [], 0.0   # seen: (laser pose in the odometry frame, points)
-    last_scan = first_scan
-    try:
-        while time.monotonic() < deadline and winner is None:
-            turning = goal.rotate_in_place and resolver.turned < 2 * math.pi     # one turn, by the odometry
-            node.cmd_vel_pub.publish(Twist(angular=Vector3(z=float(node.settings.rotate_speed) if turning else 0.0)))
-            msg = node.scans.wait_after(since, max(0.0, deadline - since), cancelled)
+
+def resolve_by_motion(result: LocalizationResult, first_msg, base_T_laser: Rigid2D, duration_s: float,
+                      rotate_in_place: bool, *, localizer, scans: ScanWaiter, odometry: PoseHistory,
+                      odometry_arrived: Callable[[float], bool], publish_cmd_vel: Callable[[Twist], None],
+                      rotate_speed: float, odom_topic: str, cancelled: Callable[[], bool], feedback,
+                      log: Callable[[str], None]) -> tuple[LocalizationResult, object]:
+    """Follow `result`'s hypotheses over the scans arriving for up to `duration_s`: (the
+    winner as a localized result, or the result still ambiguous with the hypotheses left;
+    the last scan message used - the poses are the robot's at its stamp).
+
+    `odometry_arrived(timeout_s)`: whether any odometry has come, waiting up to timeout_s
+    (raises Cancelled on cancel); `publish_cmd_vel(twist)`: the cmd_vel publisher's
+    publish; `feedback(progress, stage, best_score, hypotheses)` as the action's."""
+    first_stamp = stamp_seconds(first_msg.header.stamp)
+    start_odometry = odometry.at(first_stamp) if odometry_arrived(ODOMETRY_GRACE_S) else None
+    if start_odometry is None:
+        return dataclasses.replace(result, message=f'{result.message} (no odometry on {odom_topic}: '
+                                                   f'cannot resolve by motion)'), first_msg
+    follower = HypothesisFollower(result, localizer, base_T_laser, start_odometry, first_stamp)
+    log(f'resolving by motion: {len(follower.resolver.tracks)} hypotheses, up to {duration_s:.0f} s'
+        + (', turning in place' if rotate_in_place else ''))
+    deadline = time.monotonic() + duration_s
+
+    def live_observations():
+        since = time.monotonic()
+        while since < deadline:
+            turning = rotate_in_place and follower.turned < 2 * math.pi      # one turn, by the odometry
+            publish_cmd_vel(Twist(angular=Vector3(z=float(rotate_speed) if turning else 0.0)))
+            msg = scans.wait_after(since, max(0.0, deadline - since), cancelled)   # Cancelled goes through
             if msg is None:
-                break
+                return
             since = time.monotonic()
             stamp = stamp_seconds(msg.header.stamp)
-            last_scan = msg
-            motion, last_stamp = node.odom_history.motion(last_stamp, stamp) or Rigid2D(), stamp
             try:
                 points = scan_to_points(scan_from_msg(msg))
             except ScanError:
-                continue
-            odom = node.odom_history.at(stamp)
-            if odom is not None:
-                seen.append((odom * base_T_laser, points))
-            leader = resolver.update(motion, pose_fitter(matcher, points, base_T_laser))
-            if leader is not None and time.monotonic() - checked >= 1.0:    # a search: at most once a second
-                checked = time.monotonic()
-                winner = settle(node.localizer, seen, base_T_laser, leader.pose)
-            feedback(0.95, 'resolving_by_motion', resolver.tracks[0].evidence if resolver.tracks else 0.0,
-                     len(resolver.tracks))
+                continue        # the odometry keeps the motion since the last scan used
+            yield Observation(points, odometry.at(stamp), stamp, msg)
+
+    def on_step(f: HypothesisFollower):
+        tracks = f.resolver.tracks
+        feedback(0.95, 'resolving_by_motion', tracks[0].evidence if tracks else 0.0, len(tracks))
+
+    try:
+        follower.follow(live_observations(), on_step)
     finally:
-        node.cmd_vel_pub.publish(Twist())       # stop, however this ends
-    hypotheses = [Hypothesis(t.pose, t.evidence) for t in resolver.tracks]
-    moved = f'{resolver.travelled:.2f} m and {math.degrees(resolver.turned):.0f} deg'
-    how = 'one place led and the scans seen, fused into one view, confirm it'
-    if winner is None and not cancelled():
-        winner = settle(node.localizer, seen, base_T_laser)
-        how = 'the scans seen, fused into one view, match one place'
-    if winner is None:
-        return dataclasses.replace(result, hypotheses=hypotheses, pose=hypotheses[0].pose if hypotheses else None,
-                                   message=f'ambiguous after {time.monotonic() - start:.0f} s of motion ({moved}): '
-                                           f'{len(hypotheses)} place(s) still match; see the hypotheses'), last_scan
-    return dataclasses.replace(winner, hypotheses=[Hypothesis(winner.pose, winner.score)] + hypotheses[1:],
-                               message=f'localized by motion after {moved}: {how}'), last_scan
+        publish_cmd_vel(Twist())      # stop, however this ends (before the last search)
+    outcome = follower.finish(search_fused=not cancelled())
+    return outcome.result, first_msg if outcome.last is None else outcome.last.source

@@ -337,7 +337,13 @@ class GlobalLocServer(LifecycleNode):
         except ScanError as e:
             return self.refuse(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
         if result.outcome == Outcome.AMBIGUOUS and goal.resolve_by_motion_s > 0:
-            result, msg = resolve_by_motion(self, goal, result, msg, base_T_laser, cancelled, feedback)
+            result, msg = resolve_by_motion(
+                result, msg, base_T_laser, goal.resolve_by_motion_s, goal.rotate_in_place, localizer=localizer,
+                scans=self.scans, odometry=self.odom_history,
+                odometry_arrived=lambda timeout_s: self.odom.wait_after(0.0, timeout_s, cancelled) is not None,
+                publish_cmd_vel=self.cmd_vel_pub.publish, rotate_speed=self.settings.rotate_speed,
+                odom_topic=self.settings.odom_topic, cancelled=cancelled, feedback=feedback,
+                log=self.get_logger().info)
             scan = scan_from_msg(msg)      # the poses are the robot's at the last scan used
         out = result_to_msg(result, self.settings.map_frame, msg.header.stamp, time.monotonic() - start)
         out.scan_stamp = msg.header.stamp
