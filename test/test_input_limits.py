@@ -7,10 +7,15 @@ import os
 import numpy as np
 import pytest
 
+from conftest import assert_pose_near
 from global_loc.core import limits
+from global_loc.core.localizer import Localizer
 from global_loc.core.map_io import MapError, from_occupancy_grid, load_map_yaml, make_map, save_map_yaml
+from global_loc.core.mount import LaserMount, MountError
 from global_loc.core.scan import Scan, ScanError, scan_to_points
-from global_loc.core.transform import Rigid2D
+from global_loc.core.transform import Rigid2D, pose_correct
+from global_loc.sim.raycast import raycast_ranges, simulate_scan
+from global_loc.sim.synthetic_maps import small_room
 
 
 def fan(n=181, angle_min=-math.pi / 2, increment=math.pi / 180, angle_max='consistent'):
@@ -106,3 +111,59 @@ def test_map_image_that_is_a_fifo_or_a_loop_says_so(tmp_path):
     os.symlink(tmp_path / 'm.pgm', tmp_path / 'm.pgm')
     with pytest.raises(MapError, match=r'image .*m.pgm is a symlink loop'):
         load_map_yaml(path)
+
+
+# ---- item 6: an upside-down laser -------------------------------------------------------
+def test_mount_from_tf_reads_the_x_axis_heading_and_upside_down():
+    upright = LaserMount.from_roll_pitch_yaw(0.2, -0.1, 0.0, 0.0, 0.7)
+    assert upright == LaserMount(Rigid2D(0.2, -0.1, pytest.approx(0.7)), False)
+    flipped = LaserMount.from_roll_pitch_yaw(0.2, -0.1, math.pi, 0.0, 0.7)
+    assert flipped.upside_down and flipped.base_T_laser.yaw == pytest.approx(0.7)
+    # the same rotation said as pitch pi and a yaw off by pi
+    same = LaserMount.from_roll_pitch_yaw(0.2, -0.1, 0.0, math.pi, 0.7 - math.pi)
+    assert same.upside_down and same.base_T_laser.yaw == pytest.approx(0.7)
+    # a quaternion with roll pi about x, then yaw 0.7: q = qz(0.7) * qx(pi)
+    c, s = math.cos(0.35), math.sin(0.35)
+    from_q = LaserMount.from_quaternion(0.2, -0.1, c, s, 0.0, 0.0)     # (x, y, z, w) = (cos, sin, 0, 0)
+    assert from_q.upside_down and from_q.base_T_laser.yaw == pytest.approx(0.7)
+    assert LaserMount.from_roll_pitch_yaw(0, 0, math.radians(178), 0, 0).upside_down   # within the tilt bound
+
+
+@pytest.mark.parametrize('roll, pitch', [(math.radians(30), 0.0), (0.0, math.radians(-10)), (math.pi / 2, 0.0),
+                                         (math.pi - math.radians(20), 0.0)])
+def test_a_tilted_laser_is_refused_with_the_reason(roll, pitch):
+    with pytest.raises(MountError, match='tilted .* out of the horizontal plane'):
+        LaserMount.from_roll_pitch_yaw(0.0, 0.0, roll, pitch, 0.3)
+
+
+def test_upright_negates_every_angle_and_keeps_a_contradiction_visible():
+    mount = LaserMount(Rigid2D(), upside_down=True)
+    up = mount.upright(fan())
+    assert up.angle_min == pytest.approx(math.pi / 2) and up.angle_increment == pytest.approx(-math.pi / 180)
+    assert np.allclose(scan_to_points(up).points[:, 1], -scan_to_points(fan()).points[:, 1])
+    with pytest.raises(ScanError, match='angle_max'):
+        scan_to_points(mount.upright(fan(angle_max=0.0)))
+    scan = fan()
+    assert LaserMount().upright(scan) is scan
+
+
+@pytest.mark.parametrize('method', ['bnb', 'template_ccoeff'])
+@pytest.mark.parametrize('base', [Rigid2D(2.5, 2.2, -0.6), Rigid2D(3.0, 2.0, 2.5)])
+def test_an_upside_down_laser_localizes_right(method, base):
+    """The laser 0.25 m ahead of the base, x axis along the base's, upside down: its beam at
+    laser angle a points at base heading -a. Read as an upright laser's the scan is the
+    room's mirror image; turned upright by its mount it gives the base's pose."""
+    room = small_room()
+    mount = LaserMount.from_roll_pitch_yaw(0.25, 0.0, math.pi, 0.0, 0.0)
+    laser_pose = base * mount.base_T_laser
+    upright_scan = simulate_scan(room, laser_pose, 240.0, 481, 8.0)
+    angles = upright_scan.angles()
+    # what the upside-down laser reports: beam i at laser angle angles[i] sees the room at -angles[i]
+    raw = Scan(upright_scan.angle_min, upright_scan.angle_increment, upright_scan.range_min,
+               upright_scan.range_max, raycast_ranges(room, laser_pose, -angles, 8.0), angle_max=float(angles[-1]))
+    localizer = Localizer(room)
+    result = localizer.localize(mount.upright(raw), method=method, base_T_laser=mount.base_T_laser)
+    assert result.success, result.message
+    assert_pose_near(result.pose, base, 0.1, 3.0)
+    as_if_upright = localizer.localize(raw, method=method, base_T_laser=mount.base_T_laser)   # the mirror image
+    assert as_if_upright.pose is None or not pose_correct(as_if_upright.pose, base)
