@@ -1,4 +1,4 @@
-"""The pipeline: scan -> points -> matcher -> distinct hypotheses -> verdict -> base pose.
+"""The pipeline: scan -> points -> matcher (distinct hypotheses) -> verdict -> base pose.
 
 `Localizer` holds one map and the matchers built for it (each built on first use and
 kept, so a server pays a matcher's precomputation once). The ROS server, the CLI and
@@ -16,7 +16,7 @@ import numpy as np
 from .limits import ANGLE_STEP_DEG, check_within
 from .map_io import OccupancyMap
 from .matchers import BranchAndBoundOptions, MatchOptions, make_matcher, resolve_method
-from .matchers.base import ProgressFn, distinct
+from .matchers.base import ProgressFn
 from .outcome import Outcome
 from .scan import Scan, ScanPoints, require_shape, scan_to_points
 from .search_region import SearchRegion
@@ -34,9 +34,6 @@ class LocalizerConfig:
     method: str = 'bnb'                    # matcher name, see matchers.method_names()
     angle_step_deg: float = 5.0            # Δα of the rotated-template matcher
     opening_kernel: int = 3                # morphological opening of the local map, pixels (0 = off)
-    num_hypotheses: int = 5                # distinct hypotheses returned
-    hypothesis_min_distance: float = 1.0   # m: closer poses ...
-    hypothesis_min_angle_deg: float = 20.0  # ... with closer headings are one hypothesis
     # Fixed covariance of the thesis matchers (thesis §3.1); defaults are AMCL's initial_cov_{xx,yy,aa}.
     covariance_xy: float = 0.25            # m^2
     covariance_yaw: float = 0.0685         # rad^2 ((15 deg)^2)
@@ -121,16 +118,16 @@ class Localizer:
         candidates = [c for c in found.candidates if all(map(math.isfinite, (*c.laser_pose.as_tuple(), c.score)))]
         if bounded:
             candidates = [c for c in candidates if region.contains(c.laser_pose * laser_T_base)]
-        best = distinct(candidates, cfg.num_hypotheses, cfg.hypothesis_min_distance,
-                        math.radians(cfg.hypothesis_min_angle_deg))
-        verdict = matcher.judge(best, found.stats)
-        hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in best]
+        # the matcher decided which hypotheses are distinct; the verdict judges them as they are
+        verdict = matcher.judge(candidates, found.stopped)
+        hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in candidates]
         result = LocalizationResult(verdict.outcome, verdict.message, matcher.name, confidence=verdict.confidence,
                                     hypotheses=hyps, time_s=time.perf_counter() - t0, dropped=points.dropped,
                                     covariance=np.diag([cfg.covariance_xy, cfg.covariance_xy, cfg.covariance_yaw]),
                                     search_stats=found.stats)
         if hyps:
             result.pose, result.score = hyps[0].pose, hyps[0].score
-            if best[0].covariance is not None:
-                result.covariance = covariance_of_composition(best[0].laser_pose, best[0].covariance, laser_T_base)
+            if candidates[0].covariance is not None:
+                result.covariance = covariance_of_composition(candidates[0].laser_pose, candidates[0].covariance,
+                                                              laser_T_base)
         return result

@@ -1,12 +1,13 @@
 """The one interface every matcher implements.
 
 A matcher is built once per map (precomputation in __init__, reused for every scan)
-and aligns one scan's points against that map. `match` returns a `Match`: candidate
-laser poses in the map frame with scores, best first (higher is better), and what the
-search wants the verdict to know (bnb: whether it was exhaustive). It reports progress
-through `progress(fraction, best_score)`, which may raise `Cancelled` to stop it early.
-`judge` turns the distinct hypotheses and those statistics into a Verdict; it reads
-nothing else, so one matcher serves any number of threads and callers.
+and aligns one scan's points against that map. `match` returns a `Match`: the distinct
+hypotheses (laser poses in the map frame with scores, best first, higher is better; the
+matcher decides distinctness, once, in metres: `distinct`), why the search stopped short
+if it did, and its statistics. It reports progress through `progress(fraction,
+best_score)`, which may raise `Cancelled` to stop it early. `judge` turns exactly those
+hypotheses into a Verdict; it reads nothing else, so one matcher serves any number of
+threads and callers, and the caller only presents what both returned.
 """
 from __future__ import annotations
 
@@ -39,9 +40,17 @@ class Candidate:
     see_through: Optional[float] = None    # bnb: fraction of the beams that would pass through mapped walls
 
 
+# Distinct hypotheses, for every matcher (bnb declares them as options with these defaults):
+# how many, and poses closer than DISTINCT_M metres *and* DISTINCT_ANGLE rad are one place.
+HYPOTHESES = 8
+DISTINCT_M = 1.0
+DISTINCT_ANGLE = math.radians(20.0)
+
+
 def distinct(candidates: list[Candidate], k: int, min_distance: float, min_angle: float) -> list[Candidate]:
     """Non-maximum suppression in (x, y, yaw): the best k candidates no two of which are
-    within min_distance metres *and* min_angle radians of each other."""
+    within min_distance metres *and* min_angle radians of each other. The one place a
+    matcher's candidates become distinct hypotheses."""
     kept: list[Candidate] = []
     def apart(c, o):
         d, a = c.laser_pose.distance_to(o.laser_pose)
@@ -58,8 +67,9 @@ def distinct(candidates: list[Candidate], k: int, min_distance: float, min_angle
 @dataclass
 class Match:
     """What one `match` call found."""
-    candidates: list[Candidate]
-    stats: Any = None        # the matcher's search statistics (bnb: SearchStats), for its verdict
+    candidates: list[Candidate]   # the distinct hypotheses, best first: what the verdict judges
+    stats: Any = None        # the matcher's search statistics (bnb: SearchStats), for diagnostics
+    stopped: str = ''        # why the search stopped before it was exhaustive ('' when it was)
 
 
 @dataclass
@@ -87,12 +97,6 @@ class MatchOptions:
     max_search_s: float = math.inf
 
 
-@dataclass(frozen=True)
-class Stopped:
-    """A thesis matcher's statistics when it stopped early (its time limit)."""
-    reason: str
-
-
 class Matcher(ABC):
     name: str = ''
     # Score at or above which a best candidate counts as a match, on this matcher's scale.
@@ -100,19 +104,33 @@ class Matcher(ABC):
     # Lead over the next distinct place, relative to the best, a success needs: any real
     # lead (1%), not a tie. bnb's verdict has its own rule (verdict.py).
     min_confidence: float = 0.01
+    # Distinct hypotheses returned (see `distinct`); bnb sets them from its options.
+    hypotheses: int = HYPOTHESES
+    distinct_m: float = DISTINCT_M
+    distinct_angle: float = DISTINCT_ANGLE
 
     def __init__(self, occupancy_map: OccupancyMap):
         self.map = occupancy_map
 
-    def judge(self, candidates: list[Candidate], stats: Any = None) -> Verdict:
-        """The verdict on the distinct hypotheses, best first. The thesis matchers:
+    def distinct(self, candidates: list[Candidate]) -> list[Candidate]:
+        """This matcher's distinct hypotheses among its candidates, best first."""
+        return distinct(candidates, self.hypotheses, self.distinct_m, self.distinct_angle)
+
+    def judge(self, candidates: list[Candidate], stopped: str = '') -> Verdict:
+        """The verdict on the distinct hypotheses (best first) of a search that stopped
+        for `stopped` ('' when it was exhaustive): the one place a search stopped short
+        is judged - never a success, a better place may lie in what it did not explore."""
+        if stopped:
+            seen = 'best of what was explored, see the hypotheses' if candidates else 'nothing found before it stopped'
+            return Verdict(Outcome.SEARCH_INCOMPLETE, 0.0, f'search incomplete: {stopped}; {seen}')
+        return self.judge_exhaustive(candidates)
+
+    def judge_exhaustive(self, candidates: list[Candidate]) -> Verdict:
+        """The verdict on an exhaustive search's distinct hypotheses. The thesis matchers:
         confidence = how far the best stands above the next, relative to it; localized
         when the best score is at least min_score *and* the confidence at least
         min_confidence (a best tied with the next - confidence 0, as a scan of one
         point gives - is never a success)."""
-        if isinstance(stats, Stopped):
-            return Verdict(Outcome.SEARCH_INCOMPLETE, 0.0, f'search incomplete: {stats.reason}; best of what was '
-                                                           f'explored, see the hypotheses')
         scores = [c.score for c in candidates]
         if not scores:
             return Verdict(Outcome.NO_MATCH, 0.0, f'{self.name} found no match')
@@ -129,4 +147,5 @@ class Matcher(ABC):
 
     @abstractmethod
     def match(self, points: ScanPoints, options: MatchOptions, progress: Optional[ProgressFn] = None) -> Match:
-        """Candidates for the laser pose, best first (possibly none), and the search's statistics."""
+        """The distinct hypotheses for the laser pose, best first (possibly none), why the
+        search stopped short (if it did) and its statistics."""

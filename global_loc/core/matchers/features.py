@@ -100,4 +100,4 @@ class FeatureMatcher(Matcher):
         if progress:
             progress(1.0, candidates[0].score if candidates else 0.0)
         candidates.sort(key=lambda c: -c.score)
-        return Match(candidates)
+        return Match(self.distinct(candidates))

@@ -17,7 +17,7 @@ import numpy as np
 from ..local_grid import build_local_grid, soften
 from ..pose import pose_from_match, rotation_px, translation_px
 from ..transform import normalize_angle
-from .base import Candidate, Match, Matcher, Stopped
+from .base import Candidate, Match, Matcher
 
 
 class RotatedTemplateMatcher(Matcher):
@@ -42,11 +42,10 @@ class RotatedTemplateMatcher(Matcher):
         laser = np.array([*local.laser_px, 1.0])
         candidates, best = [], -np.inf
         deadline = time.monotonic() + options.max_search_s
-        stopped = None
+        stopped = ''
         for i, angle in enumerate(angles):
             if time.monotonic() > deadline:
-                stopped = Stopped(f'{options.max_search_s:g} s search limit reached after {i} of {len(angles)} '
-                                  f'rotations')
+                stopped = f'{options.max_search_s:g} s search limit reached after {i} of {len(angles)} rotations'
                 break
             templ, local_to_templ = rotate_tight(local.image, angle)
             templ = self.blur(templ)
@@ -66,7 +65,7 @@ class RotatedTemplateMatcher(Matcher):
             if progress:
                 progress((i + 1) / len(angles), float(best))
         candidates.sort(key=lambda c: -c.score)
-        return Match(candidates, stopped)
+        return Match(self.distinct(candidates), stopped=stopped)
 
     def angles(self, options) -> np.ndarray:
         """The template's rotations (deg): every angle step over 360 deg, or those within

@@ -29,7 +29,7 @@ from ...pixel_kernels import warm_up as warm_up_pixel_kernels
 from ...scan import ScanPoints
 from ...search_region import SearchRegion
 from ...transform import Rigid2D
-from ..base import Candidate, Match, Matcher, MatchOptions, ProgressFn, distinct
+from ..base import Candidate, Match, Matcher, MatchOptions, ProgressFn
 from .free_space import see_through_fractions
 from .grids import PrecomputationGridStack
 from .kernels import ScanTables, SearchSpace, node_bounds, offset_tables, region_mask
@@ -56,13 +56,15 @@ class BranchAndBoundMatcher(Matcher):
                  slice_expansions: int = 5000):
         super().__init__(occupancy_map)
         self.options = options or BranchAndBoundOptions()
+        self.hypotheses, self.distinct_m = self.options.hypotheses, self.options.distinct_m
+        self.distinct_angle = self.options.distinct_angle
         self.stack = PrecomputationGridStack(occupancy_map, self.options)
         self.searcher = ThreadedSearch(slice_expansions)
         warm_up()
 
-    def judge(self, candidates, stats=None):
+    def judge_exhaustive(self, candidates):
         """See verdict.judge."""
-        return judge(candidates, stats, self.options)
+        return judge(candidates, self.options)
 
     def prepare(self, points: np.ndarray) -> np.ndarray:
         """One point per cell (voxel filter), at most max_points of them, evenly chosen."""
@@ -134,12 +136,12 @@ class BranchAndBoundMatcher(Matcher):
         stats = SearchStats(exact=exact, angles=n_angles, points=len(pts), leaves=len(scores),
                             expansions=expansions, per_level=tuple(per_level.tolist()), top_nodes=len(tu),
                             threads=search_threads(), best_leaf=float(scores.max()) if len(scores) else 0.0,
-                            stopped=stopped, search_s=search_s)
+                            search_s=search_s)
         # 3. Peaks, refined, checked for free space, ranked.
         candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], scores, pts, d0, points)
         if progress:
             progress(1.0, candidates[0].score if candidates else 0.0)
-        return Match(candidates, stats)
+        return Match(candidates, stats, stopped)
 
     def fit_at(self, points: ScanPoints, laser_pose: Rigid2D) -> tuple[float, float, Rigid2D]:
         """How well the map explains the scan at a laser pose, refined within about a cell
@@ -168,14 +170,17 @@ class BranchAndBoundMatcher(Matcher):
         return SearchSpace(self.map.width, self.map.height, n_angles, self.options.keep_ratio, u, v, r, a, w)
 
     def refine_peaks(self, tu, tv, ta, scores, pts, d0, points: ScanPoints) -> list[Candidate]:
-        """The distinct peaks among the leaves, refined, ranked by field score x (1 -
+        """The distinct hypotheses among the leaves (decided here, once, in metres: `distinct`
+        on the best leaf of each bin half as wide as distinct_m and distinct_angle - two
+        leaves in one bin are never two hypotheses), refined, ranked by field score x (1 -
         see-through share); the best carries the landscape covariance."""
         opt = self.options
         frame = self.map.frame
         leaves = [Candidate(frame.pixel_pose_to_world(float(tu[i]), float(tv[i]), float(ta[i] * d0)),
                             float(scores[i]))
-                  for i in bin_maxima(tu, tv, ta, scores, d0, self.map.height, opt.distinct_cells, opt.distinct_angle)]
-        peaks = distinct(leaves, opt.hypotheses, opt.distinct_cells * self.map.resolution, opt.distinct_angle)
+                  for i in bin_maxima(tu, tv, ta, scores, d0, self.map.height, opt.distinct_m / self.map.resolution / 2,
+                                      opt.distinct_angle / 2)]
+        peaks = self.distinct(leaves)
         starts = [frame.world_pose_to_pixel(c.laser_pose) for c in peaks]
         refined = np.array([refine(self.stack.field, u, v, yaw, pts, self.map.resolution)
                             for u, v, yaw in starts]).reshape(-1, 4)

@@ -3,8 +3,9 @@ its metadata, from which the server declares its `bnb.*` parameters and the CLI 
 `--bnb-*` flags (`option_fields`)."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, fields
+
+from ..base import DISTINCT_ANGLE, DISTINCT_M, HYPOTHESES
 
 
 def _option(default, help_text: str):
@@ -21,10 +22,11 @@ class BranchAndBoundOptions:
     keep_ratio: float = _option(0.9, 'nodes bounded above keep_ratio x the best score are explored: every '
                                      'pose scoring that high is found (the hypotheses, the margin)')
     max_nodes: int = _option(400000, 'node expansions after which the search stops and says it was not exhaustive')
-    hypotheses: int = _option(8, 'distinct poses refined and returned')
-    distinct_cells: float = _option(16.0, 'poses closer than this many cells (and distinct_angle) are one peak')
-    distinct_angle: float = _option(math.radians(20.0), 'poses closer than this (rad, and distinct_cells) '
-                                                        'are one peak')
+    hypotheses: int = _option(HYPOTHESES, 'distinct poses refined, judged and returned')
+    distinct_m: float = _option(DISTINCT_M, 'm; poses closer than this (and distinct_angle) are one hypothesis: '
+                                            'the one place distinctness is decided, before the verdict')
+    distinct_angle: float = _option(DISTINCT_ANGLE, 'rad; poses closer than this (and distinct_m) are one '
+                                                    'hypothesis')
     see_through_tolerance_cells: float = _option(3.0, "a return's beam is checked for walls up to this many "
                                                       'cells short of its end (noise, grazing beams)')
     min_confidence: float = _option(0.5, 'confidence (see the verdict) a result needs to be a success, in (0, 1]')
@@ -35,6 +37,9 @@ class BranchAndBoundOptions:
             raise ValueError(f'bnb min_confidence must be in (0, 1], got {self.min_confidence}')
         if not 0 < self.keep_ratio < 1:
             raise ValueError(f'bnb keep_ratio must be in (0, 1), got {self.keep_ratio}')
+        if not (self.hypotheses >= 1 and self.distinct_m > 0 and self.distinct_angle > 0):
+            raise ValueError(f'bnb hypotheses must be >= 1 and distinct_m, distinct_angle > 0, got '
+                             f'{self.hypotheses}, {self.distinct_m}, {self.distinct_angle}')
 
 
 def option_fields():

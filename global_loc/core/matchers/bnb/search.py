@@ -26,7 +26,7 @@ from .kernels import PAD, FreeBlocks, Planes, ScanTables, SearchSpace, make_heap
 
 @dataclass(frozen=True)
 class SearchStats:
-    """What one search did; the verdict reads `exact`."""
+    """What one search did (diagnostics: the verdict reads Match.stopped)."""
     exact: bool            # False when max_nodes stopped it: a better place may be unexplored
     angles: int            # leaf headings over 360 deg
     points: int            # scan points searched with
@@ -36,7 +36,6 @@ class SearchStats:
     top_nodes: int
     threads: int
     best_leaf: float       # the best leaf's score, in [0, 1]
-    stopped: str = ''      # why a search that is not exact stopped (its budget of nodes or of time)
     search_s: float = 0.0  # seconds in the search proper (the top nodes' bounds and the tree), not in
                            # preparing the scan's tables or refining, checking and ranking the peaks
 

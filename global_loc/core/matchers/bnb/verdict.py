@@ -1,19 +1,16 @@
-"""bnb's verdict: a pure function of the distinct hypotheses, the search's statistics and
+"""bnb's verdict on an exhaustive search: a pure function of the distinct hypotheses and
 the options - the one place the confidence rule is written in code (the README states
-it for users)."""
+it for users). A search stopped short is judged in base.Matcher.judge."""
 from __future__ import annotations
-
-from typing import Optional
 
 import numpy as np
 
 from ...outcome import Outcome
 from ..base import Candidate, Verdict
 from .options import BranchAndBoundOptions
-from .search import SearchStats
 
 
-def judge(candidates: list[Candidate], stats: Optional[SearchStats], options: BranchAndBoundOptions) -> Verdict:
+def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdict:
     """The candidates are the distinct hypotheses, best first by ranking score (field
     score x (1 - see-through share)), each with its field score (`explained`).
 
@@ -23,13 +20,8 @@ def judge(candidates: list[Candidate], stats: Optional[SearchStats], options: Br
     smaller of the ranking score's and the field score's: the free-space check may
     reorder places but never vouches for one alone. `localized` needs confidence >=
     min_confidence; otherwise `poor match` when the map explains too little of the scan,
-    else `ambiguous`. A search stopped by its node budget is never a success: a better
-    place may lie in what it did not explore."""
+    else `ambiguous`."""
     opt = options
-    if stats is not None and not stats.exact:
-        reason = stats.stopped or f'stopped after {opt.max_nodes} node expansions'
-        return Verdict(Outcome.SEARCH_INCOMPLETE, 0.0, f'search incomplete: {reason}; best of what was explored, '
-                                                       f'see the hypotheses')
     if not candidates:
         return Verdict(Outcome.NO_MATCH, 0.0, 'bnb found no pose on free space')
     best, others = candidates[0], candidates[1:]
