@@ -60,21 +60,55 @@ def parse_truth(value) -> Rigid2D | None:
     return Rigid2D(x, y, yaw)
 
 
-def bag_scans(path: str, topic: str, every: int):
-    """(where, Scan, None) per LaserScan of a rosbag2 recording."""
+def bag_scans(path: str, topic: str, every: int, mounting: dict | None = None):
+    """(where, Scan, None) per LaserScan of a rosbag2 recording; `where` carries `mounting`
+    (where the laser's mounting came from) when given."""
     from .bagfile import read_scans
     for index, scan in read_scans(path, topic, every):
-        yield {'index': index, 'stamp': round(scan.stamp, 9)}, scan, None
+        yield {'index': index, 'stamp': round(scan.stamp, 9), **({'mounting': mounting} if mounting else {})}, \
+            scan, None
+
+
+def laser_mounting(args) -> tuple[Rigid2D, dict]:
+    """The laser's pose on the robot base, so the printed poses are the base's, as the server
+    publishes them: with --bag from the recording's /tf_static (and the /tf transforms that
+    never change) when they have it, else the --laser-x/--laser-y/--laser-yaw flags; and what
+    a line says of where it came from."""
+    flags = Rigid2D(args.laser_x or 0.0, args.laser_y or 0.0, args.laser_yaw or 0.0)
+    said = {'from': '--laser-x/--laser-y/--laser-yaw', **flags.as_dict()}
+    if not args.bag:
+        return flags, said
+    from .bagfile import MountingNotFound, read_mounting
+    try:
+        found = read_mounting(args.bag, args.topic, args.base_frame)
+    except MountingNotFound as e:
+        return flags, {**said, 'because': f'the bag has no mounting of the laser on {args.base_frame}: {e}'}
+    if any(v is not None for v in (args.laser_x, args.laser_y, args.laser_yaw)):
+        print(f'note: the laser mounting comes from the bag ({found.source}: {found.chain}); '
+              f'--laser-x/--laser-y/--laser-yaw are not used', file=sys.stderr)
+    return found.base_T_laser, {'from': found.source, 'frames': found.chain, **found.base_T_laser.as_dict()}
 
 
 def localize_main(args) -> int:
-    occupancy_map = load_map_yaml(args.map)
+    if args.carmen and not args.map:
+        from .offline_follow import carmen_map
+        occupancy_map = carmen_map(args.carmen)
+    else:
+        occupancy_map = load_map_yaml(args.map or default_map_yaml())
     bnb = BranchAndBoundOptions(**{name: getattr(args, f'bnb_{name}') for name, *_ in option_fields()})
+    base_T_laser, mounting = laser_mounting(args)
     config = LocalizerConfig(method=args.method, angle_step_deg=args.angle_step, opening_kernel=args.opening_kernel,
-                             bnb=bnb, max_search_s=args.max_search_s)
+                             bnb=bnb, max_search_s=args.max_search_s, base_T_laser=base_T_laser)
     localizer = Localizer(occupancy_map, config)
     method = localizer.matcher(args.method).name   # unknown method: fail before reading any scan
-    scans = bag_scans(args.bag, args.topic, args.every) if args.bag else json_line_scans(args.scans)
+    if args.follow:
+        from .offline_follow import follow_main
+        return follow_main(args, localizer)
+    if args.carmen:
+        from .offline_follow import carmen_scans
+        scans = carmen_scans(args.carmen, args.every)
+    else:
+        scans = bag_scans(args.bag, args.topic, args.every, mounting) if args.bag else json_line_scans(args.scans)
     for n, (where, scan, truth) in enumerate(scans, 1):
         out = {**where, 'method': method}
         try:
@@ -111,7 +145,11 @@ def localize_main(args) -> int:
 
 def simulate_main(args) -> int:
     """Ray-cast scans from seeded random free poses; each line carries its 'truth'."""
-    occupancy_map = load_map_yaml(args.map)
+    if args.carmen and not args.map:
+        from .offline_follow import carmen_map
+        occupancy_map = carmen_map(args.carmen)
+    else:
+        occupancy_map = load_map_yaml(args.map or default_map_yaml())
     rng = np.random.default_rng(args.seed)
     beams = args.beams or int(round(args.fov / 0.5)) + (0 if args.fov >= 360 else 1)
     for pose in sample_free_poses(occupancy_map, args.count, rng):
@@ -125,12 +163,29 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog='python -m global_loc', description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest='command', required=True)
     loc = sub.add_parser('localize', help='localize scans (JSON lines) in a map')
-    loc.add_argument('--map', default=default_map_yaml(), help='nav2 map YAML (default: the shipped office map)')
+    loc.add_argument('--map', help='nav2 map YAML (default: the shipped office map; with --carmen, a map built '
+                                   'from the log at its corrected poses)')
     source = loc.add_mutually_exclusive_group(required=True)
     source.add_argument('--scans', help="JSON-lines file of LaserScan fields, or '-' for stdin")
     source.add_argument('--bag', help='rosbag2 recording (directory; sqlite3 or mcap) to read LaserScans from')
+    source.add_argument('--carmen', help='CARMEN log (.log or .log.gz): its FLASER scans, truth from the corrected '
+                                         'poses, odometry from the ODOM lines')
     loc.add_argument('--topic', default='/scan', help='with --bag: the LaserScan topic (default /scan)')
-    loc.add_argument('--every', type=int, default=1, help='with --bag: localize every N-th scan (default 1)')
+    loc.add_argument('--base-frame', default='base_link',
+                     help="with --bag: the robot base's frame; the laser's mounting on it is read from the bag's "
+                          '/tf_static and fixed /tf transforms (default base_link)')
+    for axis, unit in (('x', 'm'), ('y', 'm'), ('yaw', 'rad')):
+        loc.add_argument(f'--laser-{axis}', type=float, default=None,
+                         help=f'laser mounting on the robot base, {unit} (default 0; with --bag: used only when the '
+                              f'bag has no transform to the laser frame)')
+    loc.add_argument('--every', type=int, default=1, help='with --bag or --carmen: localize every N-th scan '
+                                                          '(default 1; with --follow: start at every N-th)')
+    loc.add_argument('--follow', action='store_true',
+                     help='with --bag or --carmen: when a start scan is ambiguous, follow its hypotheses over the '
+                          'next scans with the recorded odometry, as the server resolves by motion')
+    loc.add_argument('--follow-s', type=float, default=30.0,
+                     help='with --follow: seconds of recording to follow for at most (default 30)')
+    loc.add_argument('--odom-topic', default='/odom', help='with --bag --follow: the nav_msgs/Odometry topic')
     loc.add_argument('--method', default=LocalizerConfig.method, help=f'one of: {", ".join(method_names())}')
     loc.add_argument('--angle-step', type=float, default=LocalizerConfig.angle_step_deg, help='Δα, degrees')
     loc.add_argument('--max-search-s', type=float, default=math.inf,

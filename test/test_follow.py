@@ -2,14 +2,24 @@
 (core.motion.HypothesisFollower): the pybullet simulator turns the robot in place and
 gives its wheel odometry; twin aisle ends settle, a four-fold symmetric room does not,
 and the fused view is searched by scan time, so the same observations give the same
-answer however fast they come."""
+answer however fast they come. Offline, `localize --follow` does the same on a bag written
+here and on a shared CARMEN log."""
+import json
 import math
+import os
+import subprocess
+import sys
 
+import numpy as np
 import pytest
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+from test_bag import laser_scan
 
-from conftest import aisles_with_a_box, assert_pose_near, symmetric_room
+from conftest import SHARED_DATA, aisles_with_a_box, assert_pose_near, symmetric_room
 from global_loc.bench.relocalization import turning_observations
 from global_loc.core.localizer import Localizer
+from global_loc.core.map_io import save_map_yaml
 from global_loc.core.motion import SETTLE_PERIOD_S, HypothesisFollower
 from global_loc.core.outcome import Outcome
 from global_loc.core.transform import Rigid2D
@@ -106,3 +116,110 @@ def test_a_cancelled_follow_does_not_search_the_fused_view_again():
     searches = localizer.fused_searches
     outcome = follower.finish(search_fused=False)
     assert localizer.fused_searches == searches and not outcome.settled and outcome.scans == 5
+
+
+# ---- offline: `python -m global_loc localize --bag B|--carmen LOG --follow` ------------------
+TYPES = get_typestore(Stores.ROS2_JAZZY)
+
+
+def stamp_msg(t: float):
+    sec = int(t)
+    return TYPES.types['builtin_interfaces/msg/Time'](sec=sec, nanosec=int(round((t - sec) * 1e9)))
+
+
+def odometry_msg(pose: Rigid2D, t: float):
+    m = TYPES.types
+    header = m['std_msgs/msg/Header'](stamp=stamp_msg(t), frame_id='odom')
+    q = m['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=math.sin(pose.yaw / 2), w=math.cos(pose.yaw / 2))
+    p = m['geometry_msgs/msg/Pose'](position=m['geometry_msgs/msg/Point'](x=pose.x, y=pose.y, z=0.0), orientation=q)
+    twist = m['geometry_msgs/msg/Twist'](linear=m['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0),
+                                         angular=m['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0))
+    return m['nav_msgs/msg/Odometry'](
+        header=header, child_frame_id='base_link',
+        pose=m['geometry_msgs/msg/PoseWithCovariance'](pose=p, covariance=np.zeros(36)),
+        twist=m['geometry_msgs/msg/TwistWithCovariance'](twist=twist, covariance=np.zeros(36)))
+
+
+def write_turning_bag(path, occupancy_map, start: Rigid2D, laser: LaserConfig, seconds: float) -> list[Rigid2D]:
+    """A robot turning in place (pybullet, 0.4 rad/s): /scan at 10 Hz and /odom at 20 Hz. The
+    laser is taken as the base (the odometry is the laser's pose by the wheels), as a bag
+    read without a mounting is. Returns the true laser pose of each scan."""
+    sim = Simulator(occupancy_map, laser, seed=1)
+    truths, t0 = [], 100.0
+    try:
+        sim.place(start)
+        with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            scans = writer.add_connection('/scan', 'sensor_msgs/msg/LaserScan', typestore=TYPES)
+            odom = writer.add_connection('/odom', 'nav_msgs/msg/Odometry', typestore=TYPES)
+            for k in range(int(seconds / 0.05)):
+                t = t0 + 0.05 * k
+                writer.write(odom, int(t * 1e9), TYPES.serialize_cdr(odometry_msg(sim.odom * BASE_T_LASER, t),
+                                                                     'nav_msgs/msg/Odometry'))
+                if k % 2 == 0:
+                    msg = laser_scan(sim.scan(), 0)
+                    msg.header.stamp = stamp_msg(t)
+                    writer.write(scans, int(t * 1e9), TYPES.serialize_cdr(msg, 'sensor_msgs/msg/LaserScan'))
+                    truths.append(sim.laser_pose())
+                sim.drive(0.0, 0.4, 0.05)
+    finally:
+        sim.close()
+    return truths
+
+
+def run_follow(*args):
+    out = subprocess.run([sys.executable, '-m', 'global_loc', 'localize', *args], capture_output=True, text=True,
+                         timeout=300)
+    return out, [json.loads(line) for line in out.stdout.splitlines()]
+
+
+def test_follow_on_a_bag_settles_twin_aisle_ends_with_the_recorded_odometry(tmp_path):
+    make_map, start, laser = AISLE_END
+    save_map_yaml(make_map(), tmp_path / 'world.yaml')
+    truths = write_turning_bag(tmp_path / 'run', make_map(), start, laser, 20.0)
+    out, rows = run_follow('--map', str(tmp_path / 'world.yaml'), '--bag', str(tmp_path / 'run'), '--follow',
+                           '--every', '150')
+    assert out.returncode == 0, out.stderr
+    assert [r['index'] for r in rows] == [0, 150]
+    first = rows[0]
+    assert first['single']['outcome'] == 'ambiguous' and first['single']['hypotheses'] >= 2, first
+    assert first['followed'] and first['settled'] and first['outcome'] == 'localized', first
+    assert 90 < first['turn_deg'] < 360 and first['scans'] == first['at_index']
+    assert first['distance_m'] < BASE_T_LASER.x * math.radians(first['turn_deg']) + 0.1    # the laser's circle
+    assert_pose_near(Rigid2D(first['x'], first['y'], first['yaw']), truths[first['at_index']], 0.1, 2.0)
+    assert first['follow_s'] == pytest.approx(first['at_stamp'] - first['stamp'], abs=1e-6)
+    assert first['time_s'] > 0 and first['message'].startswith('localized by motion')
+    # the last start has 5 s of recording left: followed to the end or settled within it
+    assert rows[1]['follow_s'] <= 5.0 and rows[1]['at_stamp'] <= 120.0
+    short, rows = run_follow('--map', str(tmp_path / 'world.yaml'), '--bag', str(tmp_path / 'run'), '--follow',
+                             '--every', '1000', '--follow-s', '1.5')
+    assert short.returncode == 0 and rows[0]['follow_s'] <= 1.5 and rows[0]['scans'] <= 15, rows
+
+
+def test_follow_without_odometry_in_the_bag_is_a_clear_error(tmp_path):
+    make_map, start, laser = AISLE_END
+    write_turning_bag(tmp_path / 'run', make_map(), start, laser, 1.0)
+    out, _ = run_follow('--bag', str(tmp_path / 'run'), '--follow', '--odom-topic', '/wheel_odom')
+    assert out.returncode == 2 and 'no nav_msgs/msg/Odometry on /wheel_odom (--odom-topic); the recording has: ' \
+                                   '/odom (nav_msgs/msg/Odometry), /scan (sensor_msgs/msg/LaserScan)' in out.stderr
+    out, _ = run_follow('--scans', '-', '--follow')
+    assert out.returncode == 2 and '--follow needs a recording with odometry: --bag or --carmen' in out.stderr
+
+
+ACES = os.path.join(SHARED_DATA, 'carmen', 'aces-corrected.log.gz')
+
+
+@pytest.mark.skipif(not os.path.exists(ACES), reason=f'shared CARMEN logs not found ({ACES})')
+def test_follow_on_a_carmen_log_settles_with_its_raw_odometry():
+    """ACES (nearly four-fold symmetric): the ambiguous starts are followed over the next
+    scans with the ODOM lines' raw odometry, and settle on the corrected pose."""
+    out, rows = run_follow('--carmen', ACES, '--follow', '--every', '60')
+    assert out.returncode == 0, out.stderr
+    assert [r['index'] for r in rows] == list(range(0, 440, 60))
+    followed = [r for r in rows if r['followed']]
+    assert all(r['single']['outcome'] == 'ambiguous' for r in followed)
+    assert all(not r['followed'] and r['outcome'] == r['single']['outcome'] for r in rows if r not in followed)
+    settled = [r for r in followed if r['settled']]
+    assert settled, followed
+    for r in settled:
+        assert r['outcome'] == 'localized' and r['at_index'] > r['index'] and r['distance_m'] > 0.5, r
+        assert r['error_xy'] < 0.2 and r['error_yaw_deg'] < 5, r     # against the corrected pose of that scan
