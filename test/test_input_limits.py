@@ -3,6 +3,7 @@ a stated budget, scans whose fields contradict each other, upside-down lasers, p
 tighter than the search's resolution, absurd map resolutions, map paths that are not files."""
 import math
 import os
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ from conftest import assert_pose_near
 from global_loc.core import limits
 from global_loc.core.localizer import Localizer
 from global_loc.core.map_io import MapError, from_occupancy_grid, load_map_yaml, make_map, save_map_yaml
+from global_loc.core.matchers import MatchOptions
 from global_loc.core.mount import LaserMount, MountError
 from global_loc.core.scan import Scan, ScanError, scan_to_points
 from global_loc.core.transform import Rigid2D, pose_correct
@@ -167,3 +169,50 @@ def test_an_upside_down_laser_localizes_right(method, base):
     assert_pose_near(result.pose, base, 0.1, 3.0)
     as_if_upright = localizer.localize(raw, method=method, base_T_laser=mount.base_T_laser)   # the mirror image
     assert as_if_upright.pose is None or not pose_correct(as_if_upright.pose, base)
+
+
+# ---- item 5: a goal's work within the angle step's bounds and a stated budget -------------
+@pytest.fixture(scope='module')
+def room_scan():
+    room = small_room()
+    return room, scan_to_points(simulate_scan(room, Rigid2D(2.5, 2.2, -0.6), 240.0, 481, 8.0))
+
+
+@pytest.mark.parametrize('step', [1e-3, 0.05, 0.0, -5.0, math.nan, 200.0])
+def test_the_template_matcher_refuses_an_angle_step_outside_its_parameters_bounds(room_scan, step):
+    """Before: 1e-3 deg ran 360 000 rotations (and 1e-6 built 11-22 GB of angle arrays)."""
+    room, points = room_scan
+    matcher = Localizer(room).matcher('template_ccoeff')
+    with pytest.raises(ValueError, match=r'angle step must be in \[0.1, 180\] degrees'):
+        matcher.match(points, MatchOptions(angle_step_deg=step, max_search_s=1.0))
+    if step:     # 0 on a goal is the default step
+        with pytest.raises(ValueError, match='angle step'):
+            Localizer(room).localize_points(points, 'template_ccoeff', angle_step_deg=step)
+
+
+def test_the_template_matcher_refuses_work_over_the_budget_before_allocating_it(room_scan, monkeypatch):
+    room, points = room_scan
+    matcher = Localizer(room).matcher('template_ccoeff')
+    monkeypatch.setattr(limits, 'MATCH_BUDGET_BYTES', 4 << 20)
+    tracemalloc.start()
+    try:
+        with pytest.raises(limits.BudgetError, match=r'3600 rotations .* more than the per-goal budget of 4 MB'):
+            matcher.match(points, MatchOptions(angle_step_deg=0.1))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 1 << 20       # only the local map was drawn
+    assert matcher.match(points, MatchOptions(angle_step_deg=5.0)).candidates   # 72 rotations fit
+
+
+def test_the_budget_admits_the_finest_step_on_a_real_map(office_map):
+    matcher = Localizer(office_map).matcher('template_ccoeff')
+    matcher.check_rotation_budget((400, 400), MatchOptions(angle_step_deg=limits.ANGLE_STEP_DEG[0]))
+
+
+def test_a_local_map_over_the_budget_is_refused_before_it_is_drawn(room_scan, monkeypatch):
+    room, points = room_scan
+    monkeypatch.setattr(limits, 'MATCH_BUDGET_BYTES', 16 << 10)
+    for method in ('features_orb', 'template_ccoeff'):
+        with pytest.raises(limits.BudgetError, match='a local map of .* pixels'):
+            Localizer(room).matcher(method).match(points, MatchOptions())

@@ -109,7 +109,7 @@ def test_d11_max_search_s_ends_any_search_as_incomplete():
     m = small_room()
     scan = simulate_scan(m, Rigid2D(1.0, 2.0, 0.3), 270.0, 271, 4.0, rng=np.random.default_rng(2))
     loc = Localizer(m, LocalizerConfig(max_search_s=0.0))
-    for method, step in (('template_ccoeff', 0.01), ('bnb', None)):
+    for method, step in (('template_ccoeff', 0.1), ('bnb', None)):
         result = loc.localize(scan, method, step)
         assert result.outcome == Outcome.SEARCH_INCOMPLETE and 'search limit' in result.message, (method, result)
         assert not result.success

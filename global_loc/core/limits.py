@@ -62,8 +62,14 @@ def check_within(name: str, value: float, bounds: tuple[float, float], unit: str
     return value
 
 
-def check_budget(what: str, nbytes: float, remedy: str, budget: int = MATCH_BUDGET_BYTES) -> None:
-    """BudgetError unless `nbytes` (computed before allocating) fits `budget`."""
+def check_angle_step(angle_step_deg: float) -> float:
+    """The rotated-template matcher's Δα within ANGLE_STEP_DEG; ValueError otherwise."""
+    return check_within('angle step', angle_step_deg, ANGLE_STEP_DEG, 'degrees')
+
+
+def check_budget(what: str, nbytes: float, remedy: str) -> None:
+    """BudgetError unless `nbytes` (computed before allocating) fits MATCH_BUDGET_BYTES."""
+    budget = MATCH_BUDGET_BYTES
     if not nbytes <= budget:
         raise BudgetError(f'{what} would need {format_bytes(nbytes)}, more than the per-goal budget of '
                           f'{format_bytes(budget)}; {remedy}')

@@ -13,7 +13,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from .limits import ANGLE_STEP_DEG, check_within
+from .limits import check_angle_step  # the server's and the request's check too
 from .map_io import OccupancyMap
 from .matchers import BranchAndBoundOptions, MatchOptions, make_matcher, resolve_method
 from .matchers.base import ProgressFn
@@ -21,11 +21,6 @@ from .outcome import Outcome
 from .scan import Scan, ScanPoints, require_shape, scan_to_points
 from .search_region import SearchRegion
 from .transform import Rigid2D, covariance_of_composition
-
-
-def check_angle_step(angle_step_deg: float) -> float:
-    """The rotated-template matcher's Δα within limits.ANGLE_STEP_DEG; ValueError otherwise."""
-    return check_within('angle step', angle_step_deg, ANGLE_STEP_DEG, 'degrees')
 
 
 @dataclass

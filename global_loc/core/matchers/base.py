@@ -18,6 +18,7 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
+from ..limits import check_budget
 from ..map_io import OccupancyMap
 from ..outcome import Outcome
 from ..scan import ScanPoints
@@ -111,6 +112,15 @@ class Matcher(ABC):
 
     def __init__(self, occupancy_map: OccupancyMap):
         self.map = occupancy_map
+
+    def check_local_map_budget(self, points: ScanPoints) -> None:
+        """BudgetError before drawing the local map (thesis matchers) when it would not fit
+        the per-goal budget: a square of side twice the farthest point (capped at the map's
+        diagonal, as build_local_grid draws it), drawn, cropped and closed - three images."""
+        farthest = float(np.hypot(points.points[:, 0], points.points[:, 1]).max(initial=0.0))
+        side = 2 * (math.ceil(min(farthest, self.map.diagonal_m) / self.map.resolution) + 1) + 1
+        check_budget(f'{self.name}: a local map of {side} x {side} pixels', 3.0 * side * side,
+                     'the scan reaches too far for this map\'s resolution; use bnb')
 
     def distinct(self, candidates: list[Candidate]) -> list[Candidate]:
         """This matcher's distinct hypotheses among its candidates, best first."""

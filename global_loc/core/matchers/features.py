@@ -72,6 +72,7 @@ class FeatureMatcher(Matcher):
         self.map_points = np.float32([kp.pt for kp in self.keypoints]).reshape(-1, 2)
 
     def match(self, points, options, progress=None):
+        self.check_local_map_budget(points)
         local = build_local_grid(points, self.map.resolution, options.opening_kernel,
                                  max_range=self.map.diagonal_m)
         kps, desc = self.detector.detectAndCompute(soften(local.image), None)

@@ -14,10 +14,14 @@ from functools import partial
 import cv2
 import numpy as np
 
+from ..limits import check_angle_step, check_budget
 from ..local_grid import build_local_grid, soften
 from ..pose import pose_from_match, rotation_px, translation_px
 from ..transform import normalize_angle
 from .base import Candidate, Match, Matcher
+
+# A Candidate with its Rigid2D, as Python objects: what one placement kept costs.
+CANDIDATE_BYTES = 512
 
 
 class RotatedTemplateMatcher(Matcher):
@@ -36,8 +40,10 @@ class RotatedTemplateMatcher(Matcher):
         self.peak_radius_px = max(1, int(round(0.5 / occupancy_map.resolution)))
 
     def match(self, points, options, progress=None):
+        self.check_local_map_budget(points)
         local = build_local_grid(points, self.map.resolution, options.opening_kernel,
                                  max_range=self.map.diagonal_m)
+        self.check_rotation_budget(local.image.shape, options)
         angles = self.angles(options)
         laser = np.array([*local.laser_px, 1.0])
         candidates, best = [], -np.inf
@@ -66,6 +72,26 @@ class RotatedTemplateMatcher(Matcher):
                 progress((i + 1) / len(angles), float(best))
         candidates.sort(key=lambda c: -c.score)
         return Match(self.distinct(candidates), stopped=stopped)
+
+    def check_rotation_budget(self, local_shape, options) -> None:
+        """BudgetError before any rotation when the work would not fit the per-goal budget
+        (limits.MATCH_BUDGET_BYTES): the angle arrays (eight float64 arrays of one value
+        per rotation with a heading prior) and their candidates, and one rotation's
+        images - the rotated canvas and its crop and blur (at most (w + h)^2 / 2 pixels
+        each, at 45 deg), the search window padded to fit, and four float32 copies of
+        its score image. ValueError for an angle step out of limits.ANGLE_STEP_DEG."""
+        rotations = math.ceil(360.0 / check_angle_step(options.angle_step_deg))
+        h, w = local_shape
+        canvas_side = (w + h) / math.sqrt(2.0) + 3
+        map_h, map_w = self.map_image.shape
+        if options.region is not None and options.region.radius_m > 0:
+            reach = 2 * (options.region.radius_m / self.map.resolution + 2)
+            map_h, map_w = min(map_h, reach + canvas_side), min(map_w, reach + canvas_side)
+        window = (max(map_w, canvas_side) + 2) * (max(map_h, canvas_side) + 2)
+        per_rotation = 3 * canvas_side ** 2 + window + 4 * 4 * window
+        nbytes = rotations * (8 * 8 + options.peaks_per_angle * CANDIDATE_BYTES) + per_rotation
+        check_budget(f'{self.name}: {rotations} rotations of a {w} x {h} local map over a {map_w:.0f} x '
+                     f'{map_h:.0f} window', nbytes, 'use a larger angle step, a smaller search region or bnb')
 
     def angles(self, options) -> np.ndarray:
         """The template's rotations (deg): every angle step over 360 deg, or those within
