@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 
 from conftest import aisles, any_pose_near, assert_pose_near, grid_map, small_room, symmetric_room, twin_rooms, walled
-from global_loc.core.localizer import Localizer
+from global_loc.core.localizer import Localizer, LocalizerConfig
 from global_loc.core.matchers import MatchOptions
 from global_loc.core.matchers.bnb import BranchAndBoundMatcher, BranchAndBoundOptions
 from global_loc.core.outcome import Outcome
 from global_loc.core.scan import scan_to_points
 from global_loc.core.transform import Rigid2D, pose_error
+from global_loc.sim.changes import changed_world
 from global_loc.sim.raycast import sample_free_poses, simulate_scan
 
 
@@ -183,3 +184,18 @@ def test_equal_scores_give_the_same_hypotheses_whatever_the_threads(threads, ope
         matcher = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=4), slice_expansions=slice_expansions)
         results.append([(c.laser_pose.as_tuple(), c.score) for c in matcher.match(points, MatchOptions()).candidates])
     assert len(results[0]) >= 4 and results[0] == results[1]
+
+
+@pytest.mark.parametrize('limit', [{'bnb': BranchAndBoundOptions(max_nodes=5)}, {'max_search_s': 0.0}])
+def test_a_search_stopped_before_any_leaf_still_returns_its_best_leaf_as_a_hypothesis(office_map, limit):
+    """A scan of a changed world (boxes, people, open doors not in the map) and a search
+    stopped by its node budget (5 expansions: too few to reach a leaf best-first) or at
+    once by its time limit: the greedy dive's leaf is there from the start, so the result
+    is `search incomplete` with the best of what was explored - never an empty list."""
+    rng = np.random.default_rng(5)
+    truth = sample_free_poses(office_map, 1, rng, clearance=0.5)[0]
+    scan = simulate_scan(changed_world(office_map, 3, truth, rng), truth, 270.0, 541, 20.0, noise_std=0.01, rng=rng)
+    result = Localizer(office_map, LocalizerConfig(**limit)).localize(scan, method='bnb')
+    assert result.outcome == Outcome.SEARCH_INCOMPLETE and not result.success
+    assert 'best of what was explored, see the hypotheses' in result.message
+    assert result.hypotheses and result.pose is not None and result.search_stats.expansions <= 6

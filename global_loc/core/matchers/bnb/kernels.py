@@ -276,6 +276,40 @@ def search_step(planes, tables, free, space, heap, shared_best, budget, per_leve
 
 
 @njit(cache=True, nogil=True)
+def dive(planes, tables, free, space, u, v, a, h):
+    """A greedy descent from node (u, v, a, h) to a leaf: at each level the child (on a
+    free block, in the search prior) with the highest bound. Returns the leaf's row (u,
+    v, angle index, exact score), score -1 if no child qualified (not for a node on a
+    free block in the prior: one of its children holds the same free cell). The search's
+    first incumbent, so that it holds a leaf before its first slice ends."""
+    terms = np.empty(tables.du.shape[1], np.int64)
+    while h > 0:
+        half = 1 << (h - 1)
+        best_bound, bu, bv, ba = np.int64(-1), u, v, a
+        for c in range(8):
+            cu = u + (c & 1) * half
+            cv = v + ((c >> 1) & 1) * half
+            ca = a + ((c >> 2) & 1) * half
+            if cu >= space.map_w or cv >= space.map_h or ca >= space.n_angles:
+                continue
+            if free.flags[free.offsets[h - 1] + (cv >> (h - 1)) * free.width[h - 1] + (cu >> (h - 1))] == 0:
+                continue
+            if not in_region(space, cu, cv, ca, h - 1):
+                continue
+            point_values(planes, tables, cu, cv, ca, h - 1, terms)
+            bound = terms.sum()
+            if bound > best_bound:
+                best_bound, bu, bv, ba = bound, cu, cv, ca
+        if best_bound < 0:
+            return np.array([u, v, a, -1], np.int64)
+        u, v, a, h = bu, bv, ba, h - 1
+        if h == 0:
+            return np.array([u, v, a, best_bound], np.int64)
+    point_values(planes, tables, u, v, a, 0, terms)
+    return np.array([u, v, a, terms.sum()], np.int64)
+
+
+@njit(cache=True, nogil=True)
 def offset_tables(theta, px, py):
     """Cell offsets (du, dv) of the points (px, py, laser frame, in cells) rotated by
     each angle of theta: the rows of ScanTables."""
@@ -304,5 +338,6 @@ def warm_up() -> None:
     search_step(planes, tables, FreeBlocks(np.ones(32, np.uint8), zeros, widths), space,
                 make_heap(top, 1), np.zeros(1, np.int64), 10, np.zeros(2, np.int64))
     region_mask(space, top[:, 0], top[:, 1], top[:, 2], 1)
+    dive(planes, tables, FreeBlocks(np.ones(32, np.uint8), zeros, widths), space, 0, 0, 0, 1)
     split_heap(*make_heap(top, 1))
     offset_tables(np.zeros(1), np.zeros(1), np.zeros(1))

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from ..base import ProgressFn
-from .kernels import PAD, FreeBlocks, Planes, ScanTables, SearchSpace, make_heap, search_step, split_heap
+from .kernels import PAD, FreeBlocks, Planes, ScanTables, SearchSpace, dive, make_heap, search_step, split_heap
 
 
 @dataclass(frozen=True)
@@ -71,13 +71,18 @@ class ThreadedSearch:
         nodes (rows u, v, a, bound). Returns the leaves scoring that high (rows u, v,
         angle index, raw score) in pose order, the expansions per level, and whether the
         search was exhaustive (False when max_nodes or the deadline (time.monotonic())
-        stopped it)."""
+        stopped it). It holds a leaf from the start (a greedy dive from each thread's best
+        top node), so a search stopped at once still returns its best leaf found."""
         threads = search_threads()
         order = np.argsort(-top_nodes[:, 3], kind='stable')     # deal the best nodes evenly
         heaps = [make_heap(top_nodes[order[k::threads]], top_level) for k in range(threads)]
         shared_best = np.zeros(PAD, np.int64)
         per_level = [np.zeros(max(top_level + 1, PAD), np.int64) for _ in heaps]   # PAD: see kernels
-        expanded, found, done = 0, [], [False] * threads
+        # the incumbent: only a real leaf's score prunes, so the result is the same with it
+        found = [np.stack([dive(planes, tables, free, space, *top_nodes[i, :3], top_level) for i in order[:threads]])]
+        found[0] = found[0][found[0][:, 3] >= 0]
+        shared_best[0] = found[0][:, 3].max(initial=0)
+        expanded, done = 0, [False] * threads
 
         def run(k, budget):
             n, done[k], leaves, heaps[k] = search_step(planes, tables, free, space, heaps[k], shared_best, budget,
@@ -105,6 +110,8 @@ class ThreadedSearch:
         leaves = np.concatenate(found) if found else np.empty((0, 4), np.int64)
         leaves = leaves[leaves[:, 3] >= space.keep * shared_best[0]]
         # in pose order, not the order the threads found them: equal scores then pick the
-        # same peaks whatever the threads
-        leaves = leaves[np.argsort((leaves[:, 0] * space.map_h + leaves[:, 1]) * space.n_angles + leaves[:, 2])]
+        # same peaks whatever the threads; once each (the search may find a dive's leaf again)
+        _, first = np.unique((leaves[:, 0] * space.map_h + leaves[:, 1]) * space.n_angles + leaves[:, 2],
+                             return_index=True)
+        leaves = leaves[first]
         return leaves, np.sum(per_level, axis=0)[:top_level + 1], all(done)
