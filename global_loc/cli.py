@@ -103,7 +103,7 @@ def localize_main(args) -> int:
     method = localizer.matcher(args.method).name   # unknown method: fail before reading any scan
     if args.follow:
         from .offline_follow import follow_main
-        return follow_main(args, localizer)
+        return follow_main(args, localizer, base_T_laser)
     if args.carmen:
         from .offline_follow import carmen_scans
         scans = carmen_scans(args.carmen, args.every)
@@ -145,11 +145,7 @@ def localize_main(args) -> int:
 
 def simulate_main(args) -> int:
     """Ray-cast scans from seeded random free poses; each line carries its 'truth'."""
-    if args.carmen and not args.map:
-        from .offline_follow import carmen_map
-        occupancy_map = carmen_map(args.carmen)
-    else:
-        occupancy_map = load_map_yaml(args.map or default_map_yaml())
+    occupancy_map = load_map_yaml(args.map)
     rng = np.random.default_rng(args.seed)
     beams = args.beams or int(round(args.fov / 0.5)) + (0 if args.fov >= 360 else 1)
     for pose in sample_free_poses(occupancy_map, args.count, rng):
