@@ -1,38 +1,71 @@
 """LaserScans from a rosbag2 recording (sqlite3 or mcap storage), read with the `rosbags`
-library: offline localization of a recorded run without a ROS installation."""
+library: offline localization of a recorded run without a ROS installation; and the laser's
+mounting on the robot base from the recording's /tf_static and /tf."""
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
+from dataclasses import dataclass
 
+import numpy as np
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
 from .core.scan import Scan
+from .core.transform import Rigid2D
 
 LASER_SCAN = 'sensor_msgs/msg/LaserScan'
+TF_MESSAGE = 'tf2_msgs/msg/TFMessage'
+TF_TOPICS = ('/tf_static', '/tf')
+# A /tf transform whose translation and rotation stay within these over the whole
+# recording is static in practice (a URDF joint published by robot_state_publisher).
+STATIC_M, STATIC_QUATERNION = 1e-6, 1e-6
+# Beyond this tilt of its z axis from the vertical the laser does not scan the map's plane.
+MAX_TILT_DEG = 10.0
 
 
 class BagError(ValueError):
     """The recording cannot be read, or has no LaserScans on the topic; the message says which."""
 
 
-def read_scans(path: str, topic: str, every: int = 1) -> Iterator[tuple[int, Scan]]:
-    """(index on the topic, Scan with the header's stamp) of every `every`-th LaserScan on `topic`."""
-    if every < 1:
-        raise BagError(f'--every must be at least 1, got {every}')
+class MountingNotFound(Exception):
+    """The recording does not say where the laser sits on the base; the message says why."""
+
+
+@dataclass(frozen=True)
+class BagMounting:
+    base_T_laser: Rigid2D      # the laser on the base, seen from above
+    source: str                # the topics it was read from, e.g. '/tf_static'
+    chain: str                 # the frames it composes, e.g. 'base_link <- shell_link <- rplidar_link'
+
+
+def open_bag(path: str) -> Reader:
     try:
         reader = Reader(path)
         reader.open()
     except Exception as e:      # rosbags raises several types for a missing or malformed recording
         raise BagError(f'{path}: not a readable rosbag2 recording ({type(e).__name__}: {e})') from None
+    return reader
+
+
+def scan_connections(reader: Reader, path: str, topic: str) -> list:
+    connections = [c for c in reader.connections if c.topic == topic]
+    if not connections:
+        topics = ', '.join(sorted({f'{c.topic} ({c.msgtype})' for c in reader.connections})) or 'none'
+        raise BagError(f'{path}: no topic {topic}; the recording has: {topics}')
+    other = sorted({c.msgtype for c in connections} - {LASER_SCAN})
+    if other:
+        raise BagError(f'{path}: {topic} carries {", ".join(other)}, not {LASER_SCAN}')
+    return connections
+
+
+def read_scans(path: str, topic: str, every: int = 1) -> Iterator[tuple[int, Scan]]:
+    """(index on the topic, Scan with the header's stamp) of every `every`-th LaserScan on `topic`."""
+    if every < 1:
+        raise BagError(f'--every must be at least 1, got {every}')
+    reader = open_bag(path)
     try:
-        connections = [c for c in reader.connections if c.topic == topic]
-        if not connections:
-            topics = ', '.join(sorted({f'{c.topic} ({c.msgtype})' for c in reader.connections})) or 'none'
-            raise BagError(f'{path}: no topic {topic}; the recording has: {topics}')
-        other = sorted({c.msgtype for c in connections} - {LASER_SCAN})
-        if other:
-            raise BagError(f'{path}: {topic} carries {", ".join(other)}, not {LASER_SCAN}')
+        connections = scan_connections(reader, path, topic)
         typestore = get_typestore(Stores.ROS2_JAZZY)
         for index, (connection, _, raw) in enumerate(reader.messages(connections=connections)):
             if index % every:
@@ -43,3 +76,113 @@ def read_scans(path: str, topic: str, every: int = 1) -> Iterator[tuple[int, Sca
                               msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
     finally:
         reader.close()
+
+
+def read_mounting(path: str, topic: str, base_frame: str) -> BagMounting:
+    """The pose on `base_frame` of the frame the first LaserScan on `topic` was taken in,
+    composed from /tf_static and the /tf transforms that never change in the recording.
+    MountingNotFound (with the reason) when the recording does not have it; BagError when
+    the recording is unreadable or the laser is not level."""
+    reader = open_bag(path)
+    try:
+        typestore = get_typestore(Stores.ROS2_JAZZY)
+        first = next(reader.messages(connections=scan_connections(reader, path, topic)), None)
+        if first is None:
+            raise MountingNotFound(f'no LaserScan on {topic}')
+        laser_frame = frame_name(typestore.deserialize_cdr(first[2], first[0].msgtype).header.frame_id)
+        if not laser_frame:
+            raise MountingNotFound(f'the scans on {topic} have no frame_id')
+        parents, sources, moving = static_transforms(reader, typestore)
+    finally:
+        reader.close()
+    ignored = f' ({", ".join(sorted(moving))} on /tf move during the recording)' if moving else ''
+    if not parents and laser_frame != frame_name(base_frame):
+        raise MountingNotFound(f'no transforms on {" or ".join(TF_TOPICS)} that stay fixed{ignored}')
+    base_frame = frame_name(base_frame)
+    up_from_laser, up_from_base = path_to_root(parents, laser_frame), path_to_root(parents, base_frame)
+    common = next((f for f in up_from_laser if f in up_from_base), None)
+    if common is None:
+        raise MountingNotFound(f'no chain of fixed transforms from {base_frame} to the laser frame {laser_frame} '
+                               f'on {" or ".join(TF_TOPICS)}{ignored}')
+    laser_chain = up_from_laser[:up_from_laser.index(common) + 1]
+    base_chain = up_from_base[:up_from_base.index(common) + 1]
+    base_T_laser = np.linalg.inv(root_T(parents, base_chain)) @ root_T(parents, laser_chain)
+    used = {sources[f] for f in laser_chain[:-1] + base_chain[:-1]}
+    return BagMounting(level_pose(base_T_laser, base_frame, laser_frame),
+                       ', '.join(sorted(used)) or f'the scans\' frame_id is {base_frame}',
+                       ' -> '.join(base_chain + laser_chain[-2::-1]))
+
+
+def frame_name(frame_id: str) -> str:
+    return frame_id.strip().lstrip('/')
+
+
+def static_transforms(reader: Reader, typestore) -> tuple[dict, dict, set]:
+    """child frame -> (parent frame, 4x4 parent_T_child) of every /tf_static transform and
+    every /tf one that stays fixed; child frame -> the topic it came from; the /tf children
+    whose transform moves."""
+    seen: dict[str, dict] = {topic: {} for topic in TF_TOPICS}
+    moving = set()
+    connections = [c for c in reader.connections if c.topic in TF_TOPICS and c.msgtype == TF_MESSAGE]
+    # (rosbags reads every topic when given no connections)
+    for connection, _, raw in reader.messages(connections=connections) if connections else ():
+        for t in typestore.deserialize_cdr(raw, connection.msgtype).transforms:
+            child, parent = frame_name(t.child_frame_id), frame_name(t.header.frame_id)
+            r, q = t.transform.translation, t.transform.rotation
+            value = (parent, np.array([r.x, r.y, r.z]), np.array([q.x, q.y, q.z, q.w]))
+            known = seen[connection.topic].setdefault(child, value)
+            if connection.topic == '/tf' and not same_transform(known, value):
+                moving.add(child)
+    fixed = {**{c: v for c, v in seen['/tf'].items() if c not in moving}, **seen['/tf_static']}
+    parents = {child: (parent, matrix(translation, quaternion)) for child, (parent, translation, quaternion)
+               in fixed.items()}
+    sources = {child: '/tf_static' if child in seen['/tf_static'] else '/tf' for child in fixed}
+    return parents, sources, {f'{seen["/tf"][c][0]} -> {c}' for c in moving}
+
+
+def same_transform(a, b) -> bool:
+    quaternion_close = min(np.abs(a[2] - b[2]).max(), np.abs(a[2] + b[2]).max()) <= STATIC_QUATERNION
+    return a[0] == b[0] and np.abs(a[1] - b[1]).max() <= STATIC_M and quaternion_close
+
+
+def matrix(translation, quaternion) -> np.ndarray:
+    """4x4 homogeneous transform of a translation and a rotation quaternion (x, y, z, w)."""
+    norm = float(np.linalg.norm(quaternion))
+    if not math.isfinite(norm) or norm < 1e-9 or not np.isfinite(translation).all():
+        raise BagError(f'a transform in the recording is not finite or has a zero quaternion: '
+                       f'{translation.tolist()}, {quaternion.tolist()}')
+    x, y, z, w = quaternion / norm
+    m = np.eye(4)
+    m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                 [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                 [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    m[:3, 3] = translation
+    return m
+
+
+def path_to_root(parents: dict, frame: str) -> list[str]:
+    """`frame`, its parent, the parent's parent, ... (a loop in the tree ends the walk)."""
+    chain = [frame]
+    while chain[-1] in parents and parents[chain[-1]][0] not in chain:
+        chain.append(parents[chain[-1]][0])
+    return chain
+
+
+def root_T(parents: dict, chain: list[str]) -> np.ndarray:
+    """The pose of chain[0] in chain[-1], composing each frame's transform to its parent."""
+    m = np.eye(4)
+    for frame in reversed(chain[:-1]):
+        m = m @ parents[frame][1]
+    return m
+
+
+def level_pose(base_T_laser: np.ndarray, base_frame: str, laser_frame: str) -> Rigid2D:
+    """The laser's 2-D pose on the base; BagError when it is upside down or tilted (its scan
+    is then not the room seen from above as the matchers expect)."""
+    z_up = float(base_T_laser[2, 2])
+    tilt = math.degrees(math.acos(min(1.0, abs(z_up))))
+    if z_up < 0 or tilt > MAX_TILT_DEG:
+        how = 'upside down' if z_up < 0 else f'tilted {tilt:.1f} deg from level (at most {MAX_TILT_DEG:g})'
+        raise BagError(f'the bag\'s tf mounts {laser_frame} {how} on {base_frame}: --bag localizes level lasers only')
+    return Rigid2D(float(base_T_laser[0, 3]), float(base_T_laser[1, 3]),
+                   math.atan2(base_T_laser[1, 0], base_T_laser[0, 0]))

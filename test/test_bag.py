@@ -1,7 +1,10 @@
 """`python -m global_loc localize --bag`: rosbag2 recordings of both storage kinds, written
 here with the rosbags library from simulated scans, localized without ROS; recordings
-without the topic, or with another type on it, are clear errors."""
+without the topic, or with another type on it, are clear errors. A laser mounted turned and
+off-centre: its mounting is read from the bag's /tf_static and fixed /tf transforms, so the
+printed poses are the base's, or from the --laser-* flags when the bag has none."""
 import json
+import math
 import subprocess
 import sys
 
@@ -18,9 +21,9 @@ POSES = [Rigid2D(3.0, 4.0, 0.7), Rigid2D(12.0, 8.0, -2.0), Rigid2D(20.0, 12.5, 2
 TYPES = get_typestore(Stores.ROS2_JAZZY)
 
 
-def laser_scan(scan, sec: int):
+def laser_scan(scan, sec: int, frame_id='laser'):
     m = TYPES.types
-    header = m['std_msgs/msg/Header'](stamp=m['builtin_interfaces/msg/Time'](sec=sec, nanosec=500), frame_id='laser')
+    header = m['std_msgs/msg/Header'](stamp=m['builtin_interfaces/msg/Time'](sec=sec, nanosec=500), frame_id=frame_id)
     angle_max = scan.angle_min + scan.angle_increment * (len(scan.ranges) - 1)
     return m['sensor_msgs/msg/LaserScan'](
         header=header, angle_min=scan.angle_min, angle_max=angle_max, angle_increment=scan.angle_increment,
@@ -71,3 +74,87 @@ def test_bag_without_the_topic_or_with_another_type_is_a_clear_error(tmp_path, o
     assert out.returncode == 2 and '/scan carries std_msgs/msg/String, not sensor_msgs/msg/LaserScan' in out.stderr
     out = run_cli('--bag', str(tmp_path / 'nothing'))
     assert out.returncode == 2 and 'not a readable rosbag2 recording' in out.stderr
+
+
+# A TurtleBot 4-like mounting: base_link -> shell_link (on /tf, republished unchanged, as
+# robot_state_publisher does) -> rplidar_link (on /tf_static), turned 90 deg and off-centre.
+SHELL_ON_BASE = Rigid2D(0.2, 0.0, 0.0)
+LASER_ON_SHELL = Rigid2D(0.1, -0.1, math.pi / 2)
+LASER_ON_BASE = SHELL_ON_BASE * LASER_ON_SHELL
+
+
+def transform(parent: str, child: str, pose: Rigid2D, z: float, sec: int):
+    m = TYPES.types
+    return m['geometry_msgs/msg/TransformStamped'](
+        header=m['std_msgs/msg/Header'](stamp=m['builtin_interfaces/msg/Time'](sec=sec, nanosec=0), frame_id=parent),
+        child_frame_id=child, transform=m['geometry_msgs/msg/Transform'](
+            translation=m['geometry_msgs/msg/Vector3'](x=pose.x, y=pose.y, z=z),
+            rotation=m['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=math.sin(pose.yaw / 2),
+                                                       w=math.cos(pose.yaw / 2))))
+
+
+def write_mounted_bag(path, office_map, with_tf=True):
+    """Scans taken by the mounted laser with the base at POSES; /tf also carries odom ->
+    base_link, which moves (not a mounting)."""
+    rng = np.random.default_rng(5)
+    tf_type = 'tf2_msgs/msg/TFMessage'
+    with Writer(path, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        scans = writer.add_connection('/scan', 'sensor_msgs/msg/LaserScan', typestore=TYPES)
+        if with_tf:
+            tf_static = writer.add_connection('/tf_static', tf_type, typestore=TYPES)
+            tf = writer.add_connection('/tf', tf_type, typestore=TYPES)
+            writer.write(tf_static, 99 * 10**9, TYPES.serialize_cdr(TYPES.types[tf_type](transforms=[
+                transform('shell_link', 'rplidar_link', LASER_ON_SHELL, 0.05, 99)]), tf_type))
+        for i, base in enumerate(POSES):
+            if with_tf:
+                moving = [transform('odom', 'base_link', base, 0.0, 100 + i),
+                          transform('base_link', 'shell_link', SHELL_ON_BASE, 0.1, 100 + i)]
+                message = TYPES.types[tf_type](transforms=moving)
+                writer.write(tf, (100 + i) * 10**9, TYPES.serialize_cdr(message, tf_type))
+            scan = simulate_scan(office_map, base * LASER_ON_BASE, 270.0, 541, 20.0, noise_std=0.01, rng=rng)
+            writer.write(scans, (100 + i) * 10**9 + 5,
+                         TYPES.serialize_cdr(laser_scan(scan, 100 + i, 'rplidar_link'), 'sensor_msgs/msg/LaserScan'))
+
+
+def assert_base_poses(rows, poses=POSES):
+    for row, base in zip(rows, poses, strict=True):
+        assert row['outcome'] == 'localized', row
+        assert pose_correct(Rigid2D(row['x'], row['y'], row['yaw']), base, max_xy=0.1, max_yaw_deg=2.0), (row, base)
+
+
+def test_bag_mounting_from_tf_static_and_fixed_tf_gives_base_poses(tmp_path, office_map):
+    write_mounted_bag(tmp_path / 'run', office_map)
+    out = run_cli('--bag', str(tmp_path / 'run'))
+    assert out.returncode == 0, out.stderr
+    rows = [json.loads(line) for line in out.stdout.splitlines()]
+    assert_base_poses(rows)
+    for row in rows:
+        mounting = row['mounting']
+        assert (mounting['from'], mounting['frames']) == ('/tf, /tf_static', 'base_link -> shell_link -> rplidar_link')
+        assert (mounting['x'], mounting['y'], mounting['yaw']) == pytest.approx(LASER_ON_BASE.as_tuple(), abs=1e-4)
+    # another base frame: the laser's mounting on it
+    shell = json.loads(run_cli('--bag', str(tmp_path / 'run'), '--base-frame', 'shell_link', '--every', '3',
+                               ).stdout.splitlines()[0])['mounting']
+    assert (shell['from'], shell['frames']) == ('/tf_static', 'shell_link -> rplidar_link')
+    assert (shell['x'], shell['y'], shell['yaw']) == pytest.approx(LASER_ON_SHELL.as_tuple(), abs=1e-4)
+
+
+def test_bag_without_the_transform_uses_the_mounting_flags_and_says_so(tmp_path, office_map):
+    write_mounted_bag(tmp_path / 'run', office_map, with_tf=False)
+    flags = ('--laser-x', str(LASER_ON_BASE.x), '--laser-y', str(LASER_ON_BASE.y),
+             '--laser-yaw', str(LASER_ON_BASE.yaw))
+    out = run_cli('--bag', str(tmp_path / 'run'), *flags)
+    assert out.returncode == 0, out.stderr
+    rows = [json.loads(line) for line in out.stdout.splitlines()]
+    assert_base_poses(rows)
+    assert rows[0]['mounting']['from'] == '--laser-x/--laser-y/--laser-yaw'
+    assert rows[0]['mounting']['because'] == ('the bag has no mounting of the laser on base_link: '
+                                              'no transforms on /tf_static or /tf that stay fixed')
+    # a base frame the tf tree does not have: the flags, with the reason
+    write_mounted_bag(tmp_path / 'tf', office_map)
+    out = run_cli('--bag', str(tmp_path / 'tf'), '--base-frame', 'base_footprint', '--every', '3', *flags)
+    row = json.loads(out.stdout.splitlines()[0])
+    assert row['mounting']['because'].endswith('no chain of fixed transforms from base_footprint to the laser frame '
+                                               'rplidar_link on /tf_static or /tf (odom -> base_link on /tf move '
+                                               'during the recording)'), row['mounting']
+    assert_base_poses([row], POSES[:1])
