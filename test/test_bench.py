@@ -31,3 +31,34 @@ def test_search_share_table_splits_bnb_time_into_the_search_and_the_rest():
     # baseline 0.8, its 1% 0.008
     assert table[2] == '| a | 3 | 0.030 | 0.015 | 0.010 | 25% | 0.800 | 0.008 |'
     assert search_share_table([r for r in rows if r['method'] != 'bnb'], lambda r: r['cond'], 'condition') == ''
+
+
+def test_changed_world_suite_reports_each_level_with_a_plot(tmp_path):
+    out = subprocess.run([sys.executable, '-m', 'global_loc.bench', '--quick', '--suites', 'changed', '--poses', '1',
+                          '--methods', 'bnb', '--jobs', '1', '--out', str(tmp_path)],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    rows = [json.loads(line) for line in (tmp_path / 'rows.jsonl').read_text().splitlines()]
+    assert sorted({r['change'] for r in rows}) == [0, 1, 2, 3] and all('expansions' in r for r in rows)
+    report = (tmp_path / 'REPORT.md').read_text()
+    assert '## Changed world' in report and '| bnb | 3 |' in report
+    assert (tmp_path / 'changed.png').stat().st_size > 5000
+
+
+def test_a_changed_world_differs_from_its_map_more_at_each_level_and_never_at_the_robot():
+    import numpy as np
+
+    from global_loc.core.map_io import load_map_yaml
+    from global_loc.core.paths import default_map_yaml
+    from global_loc.core.transform import Rigid2D
+    from global_loc.sim.changes import ROBOT_CLEARANCE_M, changed_world
+    office = load_map_yaml(default_map_yaml())
+    robot = Rigid2D(20.675, 5.225, 0.0)
+    changed = [(changed_world(office, level, robot, np.random.default_rng(1)).occupancy != office.occupancy).sum()
+               for level in (1, 2, 3)]
+    assert 0 < changed[0] < changed[1] < changed[2]
+    world = changed_world(office, 3, robot, np.random.default_rng(1))
+    col, row = office.frame.cell_of(np.array([[robot.x, robot.y]]))[0]
+    rows, cols = np.ogrid[:office.height, :office.width]
+    at_robot = np.hypot(cols - col, rows - row) * office.resolution <= ROBOT_CLEARANCE_M
+    assert (world.occupancy[at_robot] == office.occupancy[at_robot]).all()

@@ -1,4 +1,4 @@
-"""`python -m global_loc.bench [--quick] [--suites cut,sim,carmen] [--jobs N]`
+"""`python -m global_loc.bench [--quick] [--suites cut,sim,carmen,changed] [--jobs N]`
 
 Runs the benchmark suites through the same Localizer the server uses, writes raw rows
 (rows.jsonl), REPORT.md and PNG plots into the output folder (default
@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from .changed import changed_trials
 from .relocalization import relocalization_rows
 from .report import BASELINE, write_report
 from .scaling import SIZES, scaling_rows
@@ -67,8 +68,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog='python -m global_loc.bench', description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='few poses and maps: a few minutes')
     parser.add_argument('--suites', default='cut,sim,carmen,prior,relocalization,scaling',
-                        help='comma-separated: cut, sim, carmen, prior, relocalization, scaling; and soak (the real '
-                             'server and simulator under faults, not in the default set)')
+                        help='comma-separated: cut, sim, carmen, prior, relocalization, scaling; and changed (a '
+                             'world changed since its map, three levels) and soak (the real server and simulator '
+                             'under faults), not in the default set')
     parser.add_argument('--soak-goals', type=int, default=0, help='goals of the soak suite (default 1000, quick 40)')
     parser.add_argument('--methods', default=','.join(METHODS))
     parser.add_argument('--jobs', type=int, default=os.cpu_count() or 1, help='worker processes')
@@ -98,6 +100,9 @@ def main(argv=None) -> int:
     if 'prior' in suites:
         print('simulating scans for the search-prior suite ...', file=sys.stderr)
         trials += prior_trials(maps, poses, args.seed)
+    if 'changed' in suites:
+        print('ray-casting scans in changed worlds ...', file=sys.stderr)
+        trials += changed_trials(maps, poses, args.seed)
     carmen, carmen_maps = [], {}
     if 'carmen' in suites or 'relocalization' in suites:
         print('building held-out maps from the CARMEN logs ...', file=sys.stderr)
