@@ -79,6 +79,9 @@ def main(argv=None) -> int:
     parser.add_argument('--seed', type=int, default=2015)
     parser.add_argument('--poses', type=int, default=0, help='poses per map (default: 50, quick 6; suite 1: a fifth)')
     parser.add_argument('--scans-per-log', type=int, default=0, help='real scans per log (default: 100, quick 12)')
+    parser.add_argument('--scaling-sizes', default='', help='comma-separated map sizes of the scaling suite, cells '
+                                                           f'a side (default: {",".join(map(str, SIZES))}; quick: '
+                                                           'the first three)')
     args = parser.parse_args(argv)
     out = args.out or os.path.join(REPO, 'benchmarks', 'results', 'quick' if args.quick else '')
     os.makedirs(out, exist_ok=True)
@@ -135,7 +138,8 @@ def main(argv=None) -> int:
         real = {n: m for n, m in maps.items() if '/' not in n or n.endswith('/fold0')}
         notes['scaling'] = scaling_rows(building, real, 3 if args.quick else max(5, poses // 4), args.seed,
                                         [m for m in methods if m in ('bnb', BASELINE)],
-                                        SIZES[:3] if args.quick else SIZES)
+                                        [int(s) for s in args.scaling_sizes.split(',')] if args.scaling_sizes
+                                        else SIZES[:3] if args.quick else SIZES)
     if 'soak' in suites:
         print('soak suite (server + simulator processes, faults) ...', file=sys.stderr)
         soak = soak_rows(args.soak_goals or (40 if args.quick else 1000), args.seed, os.path.join(out, 'soak_logs'))

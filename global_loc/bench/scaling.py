@@ -1,8 +1,8 @@
 """The `scaling` suite: how bnb's time per localization and its per-map precomputation
 grow with the map, beside the thesis method on the same scans.
 
-One building (building_31, 5 cm) cut to 500^2 cells and tiled to 1000^2, 2000^2 and
-4000^2; every tile gets its own random furniture (small boxes on free cells), so the
+One building (building_31, 5 cm) cut to 500^2 cells and tiled to 1000^2, 2000^2,
+4000^2 and 6000^2 (36 Mcells); every tile gets its own random furniture (small boxes on free cells), so the
 tiles are not copies of each other (copies would make every scan ambiguous). Scans: the
 ray caster's 270 deg / 20 m, 0.01 m noise, 1% dropouts, at seeded free poses anywhere
 in the map. The thesis method (rotated matchTemplate, CCOEFF, 5 deg) runs on the same
@@ -23,7 +23,7 @@ from ..core.map_io import OccupancyMap, make_map
 from ..core.transform import Rigid2D, pose_correct
 from ..sim.raycast import sample_free_poses, simulate_scan
 
-SIZES = (500, 1000, 2000, 4000)
+SIZES = (500, 1000, 2000, 4000, 6000)
 BASELINE_LIMIT_S = 60.0
 
 
@@ -59,7 +59,7 @@ def _precompute_in_child(m: OccupancyMap) -> dict:
     matcher = BranchAndBoundMatcher(m)
     seconds = time.perf_counter() - t
     return {'precompute_s': round(seconds, 2), 'grid_mb': round(matcher.stack.nbytes / 1e6, 1),
-               'memory_mb': round((_peak_rss_bytes() - before) / 1e6, 1)}
+            'memory_mb': round((_peak_rss_bytes() - before) / 1e6, 1), 'peak_mb': round(_peak_rss_bytes() / 1e6, 1)}
 
 
 def precompute_cost(m: OccupancyMap) -> dict:
@@ -92,7 +92,9 @@ def scaling_rows(building: OccupancyMap, real_maps: dict[str, OccupancyMap], pos
                 rows.append({'suite': 'scaling', 'kind': 'localize', 'map': name, 'free_m2': round(free_area_m2(m)),
                              'method': method, 'time_s': res.time_s, 'success': res.success,
                              'ok': res.pose is not None and pose_correct(res.pose, truth),
-                             'ok_loose': res.pose is not None and pose_correct(res.pose, truth, 0.5, 10.0)})
+                             'ok_loose': res.pose is not None and pose_correct(res.pose, truth, 0.5, 10.0),
+                             'outcome': res.outcome.label,
+                             'expansions': getattr(res.search_stats, 'expansions', None)})
                 if res.time_s > BASELINE_LIMIT_S:
                     too_slow.add(method)      # the rest of its scans, and larger maps, would take as long
                     break

@@ -80,16 +80,18 @@ def scaling_section(rows, all_rows, out) -> list[str]:
              'suite, 270° / 20 m) and the CARMEN logs (all folds\' scans; precomputation of fold 0\'s map). '
              f'Precomputation in a fresh process: seconds, the grids, and the peak memory\'s rise. {BASELINE} is '
              'run until one localization takes a minute ("–": not run).', '',
-             '| map | cells | free area [m²] | precompute [s] | grids [MB] | memory [MB] | bnb n | bnb success '
-             '| bnb median [s] | bnb p95 [s] | baseline median [s] | baseline / bnb (median) |',
-             '|---|---|---|---|---|---|---|---|---|---|---|---|']
+             '| map | cells | free area [m²] | precompute [s] | grids [MB] | memory [MB] | peak [MB] | bnb n '
+             '| bnb success | bnb median [s] | bnb p95 [s] | bnb budget stops | baseline median [s] '
+             '| baseline / bnb (median) |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|']
     for name, p in pre.items():
         b, t = loc.get((name, 'bnb'), []), loc.get((name, BASELINE), [])
         sb, st = stats(b) if b else None, stats(t) if t else None
         ratio = f'{st["median"] / sb["median"]:.0f}×' if sb and st else '–'
+        stops = sum(r.get('outcome') == 'search_incomplete' for r in b)
         lines.append(f'| {name} | {p["cells"] / 1e6:.2f} M | {p["free_m2"]} | {p["precompute_s"]} | {p["grid_mb"]} '
-                     f'| {p["memory_mb"]} | {len(b)} | {pct(sb["ok"]) if sb else "–"} '
-                     f'| {secs(sb["median"]) if sb else "–"} | {secs(sb["p95"]) if sb else "–"} '
+                     f'| {p["memory_mb"]} | {p.get("peak_mb", "–")} | {len(b)} | {pct(sb["ok"]) if sb else "–"} '
+                     f'| {secs(sb["median"]) if sb else "–"} | {secs(sb["p95"]) if sb else "–"} | {stops} '
                      f'| {secs(st["median"]) if st else "–"} | {ratio} |')
     plot_scaling(pre, loc, out)
     return lines + ['', '![scaling](scaling.png)', '']
