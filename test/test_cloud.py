@@ -109,7 +109,8 @@ GOOD = write_cloud(POINTS, F32, 16, height=2)
     (dict(fields=(CloudField('x', 0, 9), CloudField('y', 4, 7), CloudField('z', 8, 7))), 'unknown datatype 9'),
     (dict(fields=(CloudField('x', 0, 7), CloudField('y', 4, 7), CloudField('z', 8, 7, 0))), 'count 0'),
     (dict(fields=(CloudField('x', 0, 7), CloudField('y', 4, 7), CloudField('z', 14, 7))), 'beyond point_step 16'),
-    (dict(fields=(CloudField('x', 0, 7), CloudField('y', 4, 7), CloudField('z', 12, 8))), 'FLOAT64 x 1 at offset 12) ends at byte 20'),
+    (dict(fields=(CloudField('x', 0, 7), CloudField('y', 4, 7), CloudField('z', 12, 8))),
+     'FLOAT64 x 1 at offset 12) ends at byte 20'),
     (dict(fields=(CloudField('x', 0, 7), CloudField('y', 4, 7), CloudField('z', 8, 7), CloudField('rgb', 12, 7, 2))),
      'field rgb'),
     (dict(fields=(CloudField('x', -4, 7), CloudField('y', 4, 7), CloudField('z', 8, 7))), 'offset -4'),
@@ -127,6 +128,7 @@ def test_bad_layouts_are_refused_with_what_does_not_fit(changes, message):
         cloud_xyz(replaced(GOOD, **changes))
 
 
+@pytest.mark.ros
 def test_the_ros_message_wrapper_reads_the_layout_of_the_message():
     from builtin_interfaces.msg import Time
     from sensor_msgs.msg import PointCloud2, PointField

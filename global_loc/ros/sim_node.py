@@ -6,23 +6,35 @@ nav_msgs/Odometry on /odom (frame `odom`, child `base_link`; noise and drift set
 `odom_noise`, `odom_drift`), and the robot's true pose as geometry_msgs/PoseStamped on
 /sim/true_pose. Drives the wheels from /cmd_vel
 (geometry_msgs/Twist); /sim/set_pose (PoseStamped) teleports the robot (the kidnapping).
+
+Optional sensors (off by default: the simulator is then exactly the 2D one):
+`rear_laser:=true` publishes /scan_rear (frame `laser_rear`, `rear_fov_deg` 270, at the
+back facing back: x -0.25 m, yaw 180 deg, z 0.30 m - sim.simulator.REAR_LASER_MOUNT), at
+the front laser's rate; `lidar3d:=true` publishes /points, a sensor_msgs/PointCloud2 of a
+16-ring lidar over +-15 deg, 360 deg (frame `lidar`, organized: one row per ring, lowest
+first, NaN where a ray hit nothing; x 0, z 0.5 m - sim.lidar3d.LIDAR_MOUNT) at
+`lidar_rate_hz`, in a world extruded in 3D (walls 2.5 m, tables 0.7 m, cabinets 1.2 m).
 """
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
+import numpy as np
 from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import LaserScan
+from sensor_msgs.msg import LaserScan, PointCloud2
 
 from ..core.map_io import MapError, load_map_yaml
 from ..core.paths import default_map_yaml
 from ..core.transform import Rigid2D, format_pose
 from ..sim.laser import LaserConfig
+from ..sim.lidar3d import Lidar3DConfig
 from ..sim.simulator import OdometryNoise, Simulator
+from .cloud import cloud_to_msg
 from .convert import pose_from_msg, pose_to_msg, scan_to_msg
 from .node_main import exit_process, run_node
 
@@ -47,7 +59,12 @@ class SimNode(Node):
         seed = param('seed', 0, 'random seed for noise and clutter')
         odometry = OdometryNoise(scale_std=param('odom_noise', 0.02, "odometry: random share of each wheel's travel"),
                                  yaw_drift=param('odom_drift', 0.01, 'odometry: heading drift, rad per metre'))
-        self.sim = Simulator(load_map_yaml(map_yaml), laser, seed=seed, odometry_noise=odometry)
+        rear = (replace(laser, fov_deg=param('rear_fov_deg', 270.0, 'rear laser field of view, degrees'))
+                if param('rear_laser', False, 'a rear laser on /scan_rear (frame laser_rear)') else None)
+        lidar = (Lidar3DConfig(rate_hz=param('lidar_rate_hz', 10.0, '3D lidar rate, Hz'))
+                 if param('lidar3d', False, 'a 16-ring 3D lidar on /points (frame lidar)') else None)
+        self.sim = Simulator(load_map_yaml(map_yaml), laser, seed=seed, odometry_noise=odometry, rear_laser=rear,
+                             lidar=lidar)
         self.sim.place(start)
         if clutter:
             self.sim.random_clutter(clutter, keep_clear_of=start)
@@ -58,13 +75,19 @@ class SimNode(Node):
         self.pose_pub = self.create_publisher(PoseStamped, '/sim/true_pose',
                                               QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                                                          durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self.rear_pub = self.create_publisher(LaserScan, '/scan_rear', 5) if rear else None
+        if lidar:
+            self.cloud_pub = self.create_publisher(PointCloud2, '/points', 2)
+            self.create_timer(1.0 / lidar.rate_hz, self.publish_cloud)
         self.create_subscription(Twist, '/cmd_vel', self.on_cmd_vel, 10)
         self.create_subscription(PoseStamped, '/sim/set_pose', self.on_set_pose, 10)
         self.period = 1.0 / laser.rate_hz
         self.create_timer(self.period, self.tick)
         self.get_logger().info(f'sim ready: {map_yaml} as {self.sim.num_wall_boxes} boxes, robot at '
                                f'{format_pose(start)}, {clutter} clutter objects, '
-                               f'{laser.num_beams} beams over {laser.fov_deg} deg')
+                               f'{laser.num_beams} beams over {laser.fov_deg} deg'
+                               f'{f", rear laser on /scan_rear over {rear.fov_deg} deg" if rear else ""}'
+                               f'{f", 3D lidar on /points at {lidar.rate_hz} Hz" if lidar else ""}')
 
     def close(self) -> None:
         """Disconnect pybullet (run_node calls it on shutdown)."""
@@ -98,8 +121,17 @@ class SimNode(Node):
         odom.pose.pose = pose_to_msg(self.sim.odom)
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = (float(c) for c in (v, w))
         self.scan_pub.publish(msg)
+        if self.rear_pub is not None:
+            self.rear_pub.publish(scan_to_msg(self.sim.rear_scan(), 'laser_rear', self.get_clock().now().to_msg(),
+                                              self.period))
         self.odom_pub.publish(odom)
         self.pose_pub.publish(truth)
+
+    def publish_cloud(self) -> None:
+        """One revolution of the 3D lidar at the robot's current pose."""
+        points = self.sim.lidar_points()
+        rings = np.repeat(np.arange(points.shape[0])[:, None], points.shape[1], axis=1)
+        self.cloud_pub.publish(cloud_to_msg(points, 'lidar', self.get_clock().now().to_msg(), rings))
 
 
 def main(args=None):

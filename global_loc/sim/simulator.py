@@ -8,7 +8,10 @@
     sim.odom                                   # base_link in the odom frame, from the wheels (noisy)
 
 The laser is cast with rayTestBatch from the laser link's pose, so clutter added with
-`add_clutter` (boxes, cylinders not in the map) shows in the scans.
+`add_clutter` (boxes, cylinders not in the map) shows in the scans. Optional sensors:
+a rear laser (`rear_laser`: `sim.rear_scan()`, at the back facing back, REAR_LASER_MOUNT)
+and a 16-ring 3D lidar (`lidar`: `sim.lidar_points()`, LIDAR_MOUNT) in a world extruded
+in 3D (world.obstacle_heights); without them the simulator is the 2D one it always was.
 """
 from __future__ import annotations
 
@@ -20,16 +23,23 @@ import numpy as np
 import pybullet as p
 
 from ..core.map_io import OccupancyMap
+from ..core.mount3d import Mount3D
 from ..core.scan import Scan
 from ..core.transform import Rigid2D
 from .laser import LaserConfig
+from .lidar3d import LIDAR_MOUNT, Lidar3DConfig
 from .raycast import sample_free_poses
-from .world import add_map_walls
+from .world import add_map_walls, obstacle_heights
 
 URDF = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'pioneer3dx.urdf')
 # The laser's mounting on base_link, as in the URDF (laser_joint): publish it to the server.
 BASE_T_LASER = Rigid2D(0.16, 0.0, 0.0)
 LASER_HEIGHT = 0.30
+FRONT_LASER_MOUNT = Mount3D.planar(BASE_T_LASER, LASER_HEIGHT)
+# The optional rear laser: on the chassis' back edge, at the front laser's height, facing back.
+BASE_T_REAR_LASER = Rigid2D(-0.25, 0.0, math.pi)
+REAR_LASER_MOUNT = Mount3D.planar(BASE_T_REAR_LASER, LASER_HEIGHT)
+RAY_BATCH = 16384    # pybullet's largest rayTestBatch
 WHEEL_RADIUS = 0.0975
 WHEEL_SEPARATION = 0.33
 PHYSICS_HZ = 240.0
@@ -56,17 +66,23 @@ class ClutterObject:
 
 class Simulator:
     def __init__(self, occupancy_map: OccupancyMap, laser: LaserConfig | None = None, seed: int = 0,
-                 odometry_noise: OdometryNoise | None = None):
+                 odometry_noise: OdometryNoise | None = None, rear_laser: LaserConfig | None = None,
+                 lidar: Lidar3DConfig | None = None):
         self.map = occupancy_map
         self.laser = laser or LaserConfig()
+        self.rear_laser, self.lidar = rear_laser, lidar
         self.odometry_noise = odometry_noise or OdometryNoise()
         self.rng = np.random.default_rng(seed)
+        # the optional sensors' noise from streams of their own: the front laser's and the
+        # odometry's draws are the same with or without them
+        self.rear_rng, self.lidar_rng = np.random.default_rng([seed, 1]), np.random.default_rng([seed, 2])
         self.client = p.connect(p.DIRECT)
         p.setGravity(0, 0, -9.81, physicsClientId=self.client)
         p.setTimeStep(1.0 / PHYSICS_HZ, physicsClientId=self.client)
         plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=self.client)
         p.createMultiBody(0, plane, physicsClientId=self.client)
-        self.num_wall_boxes = add_map_walls(self.client, occupancy_map)
+        self.num_wall_boxes = add_map_walls(self.client, occupancy_map,
+                                            obstacle_heights(occupancy_map) if lidar else None)
         self.robot = p.loadURDF(URDF, [0, 0, 0], physicsClientId=self.client)
         joints = {p.getJointInfo(self.robot, j, physicsClientId=self.client)[1].decode(): j
                   for j in range(p.getNumJoints(self.robot, physicsClientId=self.client))}
@@ -169,16 +185,57 @@ class Simulator:
     def scan(self) -> Scan:
         """One scan from the laser's current pose: ranges to the first hit, inf where none,
         Gaussian noise, NaN dropouts."""
-        cfg = self.laser
-        a0, inc, angles = cfg.angles()
         lp = self.laser_pose()
         pos = p.getLinkState(self.robot, self.laser_link, physicsClientId=self.client)[4]
-        world = lp.yaw + angles
-        starts = np.column_stack([lp.x + cfg.range_min * np.cos(world), lp.y + cfg.range_min * np.sin(world),
-                                  np.full(len(world), pos[2])])
-        ends = np.column_stack([lp.x + cfg.range_max * np.cos(world), lp.y + cfg.range_max * np.sin(world),
-                                np.full(len(world), pos[2])])
-        hits = p.rayTestBatch(starts.tolist(), ends.tolist(), numThreads=0, physicsClientId=self.client)
-        frac = np.array([h[2] if h[0] >= 0 else np.inf for h in hits])
-        ranges = cfg.corrupt(cfg.range_min + frac * (cfg.range_max - cfg.range_min), self.rng)
+        return self._cast_scan(self.laser, lp.x, lp.y, pos[2], lp.yaw, self.rng)
+
+    def rear_scan(self) -> Scan:
+        """One scan of the rear laser (REAR_LASER_MOUNT); the simulator needs `rear_laser`."""
+        if self.rear_laser is None:
+            raise RuntimeError('this simulator has no rear laser (Simulator(..., rear_laser=LaserConfig()))')
+        pos, rot = self._sensor_pose(REAR_LASER_MOUNT)
+        return self._cast_scan(self.rear_laser, pos[0], pos[1], pos[2], math.atan2(rot[1, 0], rot[0, 0]),
+                               self.rear_rng)
+
+    def lidar_points(self) -> np.ndarray:
+        """One revolution of the 3D lidar (LIDAR_MOUNT): (rings, columns, 3) points in the
+        lidar frame, lowest ring first, NaN where a ray hit nothing within range_max."""
+        cfg = self.lidar
+        if cfg is None:
+            raise RuntimeError('this simulator has no 3D lidar (Simulator(..., lidar=Lidar3DConfig()))')
+        pos, rot = self._sensor_pose(LIDAR_MOUNT)
+        directions = cfg.directions().reshape(-1, 3)
+        world = directions @ rot.T
+        frac = self._cast(pos + cfg.range_min * world, pos + cfg.range_max * world)
+        ranges = np.where(np.isfinite(frac), cfg.range_min + frac * (cfg.range_max - cfg.range_min), np.nan)
+        if cfg.noise_std > 0:
+            ranges = ranges + self.lidar_rng.normal(0.0, cfg.noise_std, ranges.shape)
+        return (directions * ranges[:, None]).reshape(cfg.rings, cfg.columns, 3)
+
+    def _sensor_pose(self, mount: Mount3D) -> tuple[np.ndarray, np.ndarray]:
+        """A sensor's position and rotation in the world, from the body's pose (pybullet
+        keeps it at the centre of mass) and the sensor's mounting on base_link."""
+        com, q = p.getBasePositionAndOrientation(self.robot, physicsClientId=self.client)
+        body = np.array(p.getMatrixFromQuaternion(q)).reshape(3, 3)
+        base = np.asarray(com) - body @ np.array([self.base_T_com.x, self.base_T_com.y, self.com_height])
+        return base + body @ np.array([mount.x, mount.y, mount.z]), body @ mount.rotation()
+
+    def _cast(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """The hit fraction along each ray from starts to ends; inf where it hits nothing."""
+        fractions = []
+        for i in range(0, len(starts), RAY_BATCH):
+            hits = p.rayTestBatch(starts[i:i + RAY_BATCH].tolist(), ends[i:i + RAY_BATCH].tolist(), numThreads=0,
+                                  physicsClientId=self.client)
+            fractions.extend(h[2] if h[0] >= 0 else np.inf for h in hits)
+        return np.array(fractions)
+
+    def _cast_scan(self, cfg: LaserConfig, x: float, y: float, z: float, yaw: float, rng) -> Scan:
+        a0, inc, angles = cfg.angles()
+        world = yaw + angles
+        starts = np.column_stack([x + cfg.range_min * np.cos(world), y + cfg.range_min * np.sin(world),
+                                  np.full(len(world), z)])
+        ends = np.column_stack([x + cfg.range_max * np.cos(world), y + cfg.range_max * np.sin(world),
+                                np.full(len(world), z)])
+        frac = self._cast(starts, ends)
+        ranges = cfg.corrupt(cfg.range_min + frac * (cfg.range_max - cfg.range_min), rng)
         return Scan(a0, inc, cfg.range_min, cfg.range_max, ranges)
