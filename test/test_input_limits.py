@@ -3,6 +3,7 @@ a stated budget, scans whose fields contradict each other, upside-down lasers, p
 tighter than the search's resolution, absurd map resolutions, map paths that are not files."""
 import math
 import os
+import re
 import tracemalloc
 
 import numpy as np
@@ -15,6 +16,7 @@ from global_loc.core.map_io import MapError, from_occupancy_grid, load_map_yaml,
 from global_loc.core.matchers import MatchOptions
 from global_loc.core.mount import LaserMount, MountError
 from global_loc.core.scan import Scan, ScanError, scan_to_points
+from global_loc.core.search_region import SearchRegion
 from global_loc.core.transform import Rigid2D, pose_correct
 from global_loc.sim.raycast import raycast_ranges, simulate_scan
 from global_loc.sim.synthetic_maps import small_room
@@ -216,3 +218,40 @@ def test_a_local_map_over_the_budget_is_refused_before_it_is_drawn(room_scan, mo
     for method in ('features_orb', 'template_ccoeff'):
         with pytest.raises(limits.BudgetError, match='a local map of .* pixels'):
             Localizer(room).matcher(method).match(points, MatchOptions())
+
+
+# ---- item 7: a prior tighter than the search's resolution is widened to it, said ----------
+def test_widened_to_says_what_it_widened():
+    region = SearchRegion(Rigid2D(1.0, 2.0, 0.5), 0.01, math.radians(0.01))
+    wide, said = region.widened_to(0.05, math.radians(1.0))
+    assert (wide.center, wide.radius_m, wide.yaw_tolerance) == (region.center, 0.05, pytest.approx(math.radians(1.0)))
+    assert said == ("search radius 0.01 m widened to 0.05 m and yaw tolerance 0.01 deg widened to 1 deg, the "
+                    "search's resolution")
+    assert SearchRegion(Rigid2D(), 0.01, 0.0).widened_to(0.05, 0.1) == (SearchRegion(Rigid2D(), 0.05, 0.0),
+                                                                        "search radius 0.01 m widened to 0.05 m, "
+                                                                        "the search's resolution")
+    loose = SearchRegion(Rigid2D(), 1.0, 0.5)
+    assert loose.widened_to(0.05, 0.1) == (loose, '')
+    assert SearchRegion(Rigid2D()).widened_to(0.05, 0.1) == (SearchRegion(Rigid2D()), '')   # unbounded stays so
+
+
+TRUE_POSES = [Rigid2D(2.512, 2.189, -0.6), Rigid2D(1.642, 1.713, 2.385), Rigid2D(2.683, 1.338, 0.349)]
+
+
+@pytest.mark.parametrize('method', ['bnb', 'template_ccoeff'])
+@pytest.mark.parametrize('radius_m, yaw_tolerance_deg, said', [
+    (0.01, 0.0, 'search radius 0.01 m widened to'), (0.0, 0.01, 'yaw tolerance 0.01 deg widened to'),
+    (0.01, 0.01, 'search radius 0.01 m widened to .* and yaw tolerance 0.01 deg widened to')])
+def test_a_prior_tighter_than_the_search_centred_on_the_truth_localizes_and_says_it_was_widened(
+        method, radius_m, yaw_tolerance_deg, said):
+    """Before: NO_MATCH ("bnb found no pose on free space"), even centred on the true pose."""
+    room = small_room()
+    localizer = Localizer(room)
+    for truth in TRUE_POSES:
+        scan = simulate_scan(room, truth, 240.0, 481, 8.0, noise_std=0.01, rng=np.random.default_rng(1))
+        result = localizer.localize(scan, method, region=SearchRegion(truth, radius_m, math.radians(yaw_tolerance_deg)))
+        assert result.success, (truth, result.message)
+        assert_pose_near(result.pose, truth, 0.1, 3.0)
+        assert re.search(f"{said} .*, the search's resolution$", result.message), result.message
+        assert result.region.contains(result.pose) and not result.region == SearchRegion(truth, radius_m,
+                                                                                         math.radians(yaw_tolerance_deg))

@@ -58,6 +58,7 @@ class LocalizationResult:
     time_s: float = 0.0
     dropped: dict = field(default_factory=dict)
     search_stats: Any = None   # what the matcher's search did (bnb: SearchStats), for diagnostics
+    region: Optional[SearchRegion] = None   # the search prior as searched (widened to the search's resolution)
 
     @property
     def success(self) -> bool:
@@ -100,8 +101,11 @@ class Localizer:
         base_T_laser = base_T_laser or cfg.base_T_laser
         laser_T_base = base_T_laser.inverse()
         bounded = region is not None and region.bounded
-        options = MatchOptions(angle_step_deg=check_angle_step(angle_step_deg or cfg.angle_step_deg),
-                               opening_kernel=cfg.opening_kernel,
+        step = check_angle_step(angle_step_deg or cfg.angle_step_deg)
+        widened = ''
+        if bounded:    # a prior tighter than the search's resolution holds no pose it returns: widen it, said
+            region, widened = region.widened_to(*matcher.search_resolution(points, step))
+        options = MatchOptions(angle_step_deg=step, opening_kernel=cfg.opening_kernel,
                                region=region.for_laser(base_T_laser) if bounded else None,
                                max_search_s=cfg.max_search_s)
         if not self._has_obstacles:
@@ -116,10 +120,11 @@ class Localizer:
         # the matcher decided which hypotheses are distinct; the verdict judges them as they are
         verdict = matcher.judge(candidates, found.stopped)
         hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in candidates]
-        result = LocalizationResult(verdict.outcome, verdict.message, matcher.name, confidence=verdict.confidence,
+        message = f'{verdict.message}; {widened}' if widened else verdict.message
+        result = LocalizationResult(verdict.outcome, message, matcher.name, confidence=verdict.confidence,
                                     hypotheses=hyps, time_s=time.perf_counter() - t0, dropped=points.dropped,
                                     covariance=np.diag([cfg.covariance_xy, cfg.covariance_xy, cfg.covariance_yaw]),
-                                    search_stats=found.stats)
+                                    search_stats=found.stats, region=region if bounded else None)
         if hyps:
             result.pose, result.score = hyps[0].pose, hyps[0].score
             if candidates[0].covariance is not None:

@@ -35,6 +35,23 @@ class SearchRegion:
             return False
         return not (0 < self.yaw_tolerance and abs(normalize_angle(pose.yaw - self.center.yaw)) > self.yaw_tolerance)
 
+    def widened_to(self, radius_m: float, yaw_tolerance: float) -> tuple['SearchRegion', str]:
+        """This region with its disc and heading window at least `radius_m` and
+        `yaw_tolerance` (rad) - a search's resolution: a tighter prior holds no pose that
+        search can return, even centred on the truth - and what was widened, said ('' when
+        nothing was). An unbounded radius or heading stays unbounded."""
+        radius, tolerance, said = self.radius_m, self.yaw_tolerance, []
+        if 0 < radius < radius_m:
+            said.append(f'search radius {radius:.3g} m widened to {radius_m:.3g} m')
+            radius = radius_m
+        if 0 < tolerance < min(yaw_tolerance, math.pi):
+            said.append(f'yaw tolerance {math.degrees(tolerance):.3g} deg widened to '
+                        f'{math.degrees(yaw_tolerance):.3g} deg')
+            tolerance = yaw_tolerance
+        if not said:
+            return self, ''
+        return SearchRegion(self.center, radius, tolerance), ' and '.join(said) + ", the search's resolution"
+
     def for_laser(self, base_T_laser: Rigid2D) -> 'SearchRegion':
         """The region the laser lies in when the base lies in this one: the disc widened
         by the laser's offset (the base's heading turns it), the heading window turned by

@@ -113,6 +113,15 @@ class Matcher(ABC):
     def __init__(self, occupancy_map: OccupancyMap):
         self.map = occupancy_map
 
+    def search_resolution(self, points: ScanPoints, angle_step_deg: float) -> tuple[float, float]:
+        """(metres, radians): the finest position and heading this search tells apart for
+        this scan - a search prior tighter than that holds no pose it can return, so the
+        Localizer widens it to this. Here: a cell, and the turn that moves the farthest
+        point by a cell (the image matchers place the local map to a pixel)."""
+        res = self.map.resolution
+        farthest = max(float(np.hypot(points.points[:, 0], points.points[:, 1]).max(initial=0.0)), 3 * res)
+        return res, math.acos(1 - res ** 2 / (2 * farthest ** 2))
+
     def check_local_map_budget(self, points: ScanPoints) -> None:
         """BudgetError before drawing the local map (thesis matchers) when it would not fit
         the per-goal budget: a square of side twice the farthest point (capped at the map's

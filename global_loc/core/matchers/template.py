@@ -73,6 +73,10 @@ class RotatedTemplateMatcher(Matcher):
         candidates.sort(key=lambda c: -c.score)
         return Match(self.distinct(candidates), stopped=stopped)
 
+    def search_resolution(self, points, angle_step_deg: float) -> tuple[float, float]:
+        """A pixel and the rotation step (see base.Matcher)."""
+        return math.sqrt(2.0) * self.map.resolution, math.radians(angle_step_deg)
+
     def check_rotation_budget(self, local_shape, options) -> None:
         """BudgetError before any rotation when the work would not fit the per-goal budget
         (limits.MATCH_BUDGET_BYTES): the angle arrays (eight float64 arrays of one value

@@ -107,11 +107,9 @@ class BranchAndBoundMatcher(Matcher):
         if len(pts) < 3:
             return Match([])
         # 1. The leaf angle step, and the top-level nodes on blocks that hold a free cell.
-        res = self.map.resolution
-        r_max = max(float(np.hypot(pts[:, 0], pts[:, 1]).max()), 3 * res)
         top = opt.levels - 1
         step = 2 ** top
-        n_angles = int(math.ceil(2 * math.pi / math.acos(1 - res ** 2 / (2 * r_max ** 2)) / step)) * step
+        n_angles = self.leaf_angles(pts)
         d0 = 2 * math.pi / n_angles
         gu, gv, ga = np.meshgrid(np.arange(0, self.map.width, step), np.arange(0, self.map.height, step),
                                  np.arange(0, n_angles, step), indexing='ij')
@@ -155,6 +153,18 @@ class BranchAndBoundMatcher(Matcher):
         through = see_through_fractions(self.stack.occupied, np.array([[u, v, yaw]]), points, self.map.resolution,
                                         self.options)[0]
         return float(score), float(through), frame.pixel_pose_to_world(u, v, yaw)
+
+    def leaf_angles(self, pts: np.ndarray) -> int:
+        """How many leaf headings the search has for these (prepared) points: steps of at
+        most d0 = acos(1 - res^2 / 2 r_max^2), a whole number of top-level nodes' worth."""
+        res = self.map.resolution
+        r_max = max(float(np.hypot(pts[:, 0], pts[:, 1]).max(initial=0.0)), 3 * res)
+        step = 2 ** (self.options.levels - 1)
+        return int(math.ceil(2 * math.pi / math.acos(1 - res ** 2 / (2 * r_max ** 2)) / step)) * step
+
+    def search_resolution(self, points: ScanPoints, angle_step_deg: float) -> tuple[float, float]:
+        """A cell and the leaf angle step for this scan (see base.Matcher)."""
+        return self.map.resolution, 2 * math.pi / self.leaf_angles(self.prepare(points.points))
 
     def search_space(self, n_angles: int, region: Optional[SearchRegion]) -> SearchSpace:
         """The search's bounds: the map, the leaf angles, and the prior (in pixels and angle steps)."""
