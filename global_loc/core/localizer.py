@@ -72,6 +72,16 @@ class Localizer:
         self._matchers = {}
         self._has_obstacles = bool(occupancy_map.occupied.any())   # once per map, not per scan
 
+    def reconfigured(self, config: LocalizerConfig) -> 'Localizer':
+        """This map with `config` (a live parameter change), sharing the matchers already
+        built - they depend on the map and the bnb options only, which must be unchanged."""
+        if config.bnb != self.config.bnb:
+            raise ValueError('bnb options change only with a new precomputation (a new Localizer)')
+        other = Localizer.__new__(Localizer)
+        other.map, other.config, other._matchers = self.map, config, self._matchers
+        other._has_obstacles = self._has_obstacles
+        return other
+
     def matcher(self, method: str):
         """The matcher for `method`, built (precomputed for this map) on first use."""
         name = resolve_method(method)

@@ -32,7 +32,7 @@ class MapSlot(Generic[L]):
                  no_map: str = 'no map loaded yet'):
         """`build(load)` turns `load()` (which returns the map, or raises) into what is used;
         exceptions it raises are the map's error (ValueError: its message; others with their
-        type). `on_change(installed, note)` is told each install, failure or drop (a log line)."""
+        type). `on_change(installed, note, dropped)` is told each install, failure or drop (a log line)."""
         self._build = build
         self._on_change = on_change
         self._cond = threading.Condition()
@@ -127,12 +127,13 @@ class MapSlot(Generic[L]):
         except Exception as e:      # an internal error must not end the worker: say what it was
             built, error = None, f'map not loaded: {type(e).__name__}: {e}'
         with self._cond:
-            if generation != self._received:
+            dropped = generation != self._received
+            if dropped:
                 note = f'map {generation} dropped: map {self._received} arrived while it was being prepared'
                 installed = self._installed
             else:
                 installed = self._installed = Installed(generation, built, error)
                 note = error or f'map {generation} in use'
             self._cond.notify_all()
-        self._on_change(installed, note)
+        self._on_change(installed, note, dropped)
         return installed

@@ -27,6 +27,11 @@ class PoseHistory:
             cut = bisect.bisect_left(self._stamps, stamp - self.keep_s)
             del self._stamps[:cut], self._poses[:cut]
 
+    def newest_stamp(self) -> Optional[float]:
+        """The stamp of the newest pose, None when empty."""
+        with self._lock:
+            return self._stamps[-1] if self._stamps else None
+
     def at(self, stamp: float) -> Optional[Rigid2D]:
         """The pose at `stamp`, interpolated; the first or last one outside the history; None when empty."""
         with self._lock:

@@ -4,26 +4,30 @@ relocalization). The server builds it first and the rest of the path reads only 
 was asked cannot be re-interpreted further down.
 
 Each per-request quantity has the bounds of the server parameter that gives its default
-(a goal must not ask what the operator could not configure): `BOUNDS` is that one table,
-and ros/parameters.py declares the parameters' ranges from it.
+(a goal must not ask what the operator could not configure): core.limits holds them, for
+the parameters' ranges too.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
+from . import limits
 from .localizer import check_angle_step
 from .matchers import resolve_method
 from .search_region import SearchRegion
 from .transform import Rigid2D
 
-# name -> (lowest, highest) for the request's fields and their parameters.
+# request field -> (lowest, highest): the bounds of core.limits, by the fields' names.
 BOUNDS = {
-    'scan_timeout_s': (0.1, 600.0),          # how long to wait for a scan after the request
-    'resolve_by_motion_s': (0.0, 600.0),     # how long an ambiguous answer may be followed
-    'search_radius_m': (0.0, 1e5),           # a prior's disc (0: anywhere); 100 km is any map
-    'search_yaw_tolerance_deg': (0.0, 180.0),  # a prior's heading window (0: any heading)
+    'scan_timeout_s': limits.SCAN_TIMEOUT_S,
+    'resolve_by_motion_s': limits.RESOLVE_BY_MOTION_S,
+    'search_radius_m': limits.SEARCH_RADIUS_M,
+    'search_yaw_tolerance_deg': limits.YAW_TOLERANCE_DEG,
 }
+
+
+ORIGIN = Rigid2D()
 
 
 class RequestError(ValueError):
@@ -59,7 +63,7 @@ def check_bound(name: str, value: float) -> float:
 
 
 def make_request(defaults: RequestDefaults, *, method: str = '', angle_step_deg: float = 0.0,
-                 timeout_s: float = 0.0, center: Rigid2D = Rigid2D(), radius_m: float = 0.0,
+                 timeout_s: float = 0.0, center: Rigid2D = ORIGIN, radius_m: float = 0.0,
                  yaw_tolerance_deg: float = 0.0, resolve_by_motion_s: float = 0.0, rotate_in_place: bool = False,
                  publish: bool = True, publish_if_ambiguous: bool = False, origin: str = 'goal') -> Request:
     """The request with 0 / '' replaced by the defaults and every field checked; RequestError

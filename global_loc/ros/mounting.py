@@ -14,8 +14,8 @@ class LaserMounting:
     def __init__(self, node, base_frame: str, fallback: Rigid2D, fallback_roll: float = 0.0):
         """`fallback`, `fallback_roll`: the laser_* parameters (roll pi: mounted upside
         down); MountError (a ValueError) when they describe a tilted laser."""
-        self.node, self.base_frame = node, base_frame
-        self.fallback = LaserMount.from_roll_pitch_yaw(fallback.x, fallback.y, fallback_roll, 0.0, fallback.yaw)
+        self.node = node
+        self.configure(base_frame, fallback, fallback_roll)
         try:
             import tf2_ros
         except ImportError:
@@ -26,6 +26,11 @@ class LaserMounting:
         self.buffer = tf2_ros.Buffer()
         self.listener = tf2_ros.TransformListener(self.buffer, node)
 
+    def configure(self, base_frame: str, fallback: Rigid2D, fallback_roll: float = 0.0) -> None:
+        """New parameters (configure, or a live laser_* change)."""
+        self.base_frame = base_frame
+        self.fallback = LaserMount.from_roll_pitch_yaw(fallback.x, fallback.y, fallback_roll, 0.0, fallback.yaw)
+
     def mount(self, laser_frame: str) -> LaserMount:
         """The laser's mounting: from tf2 when it has it, else the parameters. MountError
         (a ScanError) when tf says the laser is tilted out of the horizontal plane."""
@@ -34,7 +39,7 @@ class LaserMounting:
                 t = self.buffer.lookup_transform(self.base_frame, laser_frame, Time()).transform
             except Exception as e:   # tf2 raises several types; any means "not known"
                 self.node.get_logger().warn(f'no tf {self.base_frame} <- {laser_frame} ({e}); '
-                                            'using the laser_* parameters')
+                                            'using the laser_* parameters', throttle_duration_sec=10.0)
             else:
                 q = t.rotation
                 return LaserMount.from_quaternion(t.translation.x, t.translation.y, q.x, q.y, q.z, q.w)

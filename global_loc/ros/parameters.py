@@ -1,101 +1,207 @@
-"""The server's ROS parameters: each declared once, with its description and range, and
-turned into the core's LocalizerConfig plus the node's own settings."""
+"""The server's ROS parameters, nav2's policy: each declared once, with its description
+and range; all read in on_configure (cleanup -> set -> configure applies new values,
+map_yaml included); those safe to change while running (`live`) apply to the next
+request when set; setting another while configured is refused with the reason (how to
+apply it). An invalid value makes configure fail with one line naming it - never a
+traceback, never a configured node whose every goal fails.
+
+`ServerConfig` is one immutable snapshot of them all; the node swaps it whole.
+"""
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.node import Node
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import InvalidParameterValueException
 
+from ..core import limits
 from ..core.localizer import LocalizerConfig
-from ..core.matchers import BranchAndBoundOptions, method_names
+from ..core.matchers import BranchAndBoundOptions, method_names, resolve_method
 from ..core.matchers.bnb.options import option_fields
 from ..core.paths import default_map_yaml
+from ..core.request import BOUNDS, RequestDefaults
 from ..core.supervisor import SupervisorConfig
 from ..core.transform import Rigid2D
 
+_L, _S = LocalizerConfig(), SupervisorConfig()
+NO_RANGE = None
+
 
 @dataclass(frozen=True)
-class ServerSettings:
-    autostart: bool
-    map_yaml: str
-    use_map_topic: bool
-    map_topic: str
-    scan_topic: str
-    initialpose_topic: str
-    scan_timeout_s: float
-    map_frame: str
-    base_frame: str
-    pose_topic: str
-    odom_topic: str
-    cmd_vel_topic: str
-    rotate_speed: float
-    health_period_s: float
-    relocalize_resolve_by_motion_s: float
+class Spec:
+    name: str
+    default: object
+    description: str
+    range: tuple | None = NO_RANGE    # inclusive (lo, hi) for numbers
+    live: bool = False                # applied to the next request when set
 
 
-def _float_range(lo: float, hi: float) -> dict:
-    return {'floating_point_range': [FloatingPointRange(from_value=lo, to_value=hi)]}
+# bnb.* ranges: what its precomputation and search can do (levels: 2^6-cell blocks at most).
+BNB_RANGES = {'sigma_cells': (0.1, 20.0), 'levels': (1, 7), 'max_points': (3, 100000), 'max_range': (0.1, 1e4),
+              'keep_ratio': (0.01, 0.999), 'max_nodes': (1, 10 ** 9), 'hypotheses': (1, 100),
+              'distinct_cells': (0.0, 1e4), 'distinct_m': (0.0, 1e3), 'distinct_angle': (0.0, math.pi),
+              'see_through_tolerance_cells': (0.0, 100.0), 'min_confidence': (0.001, 1.0)}
+
+SPECS = [
+    Spec('autostart', True, 'configure and activate on start (false: a lifecycle manager does)'),
+    Spec('map_yaml', '', 'nav2 map YAML to localize in (empty: the shipped map)'),
+    Spec('use_map_topic', False, 'take the map from an OccupancyGrid topic instead of map_yaml'),
+    Spec('map_topic', '/map', 'OccupancyGrid topic (transient local, like nav2 map_server)'),
+    Spec('scan_topic', '/scan', 'sensor_msgs/LaserScan topic'),
+    Spec('initialpose_topic', '/initialpose', 'where confident poses are published (reliable, volatile as AMCL '
+                                              'subscribes it)'),
+    Spec('scan_timeout_s', 5.0, 'how long a request waits for a scan that arrives after it, s',
+         BOUNDS['scan_timeout_s'], live=True),
+    Spec('map_frame', 'map', 'frame of the published pose'),
+    Spec('base_frame', 'base_link', 'robot base frame (for tf2, when available)'),
+    Spec('pose_topic', '/amcl_pose', "the localizer's pose (PoseWithCovarianceStamped, in map_frame), watched"),
+    Spec('odom_topic', '/odom', 'nav_msgs/Odometry: moves the watched pose and the hypotheses'),
+    Spec('cmd_vel_topic', '/cmd_vel', 'where rotate_in_place turns the robot (Twist)'),
+    Spec('rotate_speed', 0.4, 'rotate_in_place turn rate, rad/s', (0.05, 2.0), live=True),
+    Spec('health.period_s', 0.5, 'how often the fit at the watched pose is checked, s', (0.05, 60.0)),
+    Spec('relocalize.resolve_by_motion_s', 0.0, 'automatic relocalization: how long an ambiguous answer may be '
+                                                'followed while the robot moves (0: not), s',
+         BOUNDS['resolve_by_motion_s'], live=True),
+    Spec('auto_relocalize', _S.auto_relocalize, 'relocalize on its own at start (no pose yet) and when lost; '
+                                                'publishes poses', live=True),
+    Spec('health.degraded_fit', _S.degraded_fit, 'fit below which the state is degraded', (0.0, 1.0), live=True),
+    Spec('health.lost_fit', _S.lost_fit, 'fit below which, for health.lost_after_s, it is lost', (0.0, 1.0),
+         live=True),
+    Spec('health.lost_after_s', _S.lost_after_s, 'how long the fit must stay low to be lost, s', (0.0, 3600.0),
+         live=True),
+    Spec('relocalize.start_delay_s', _S.start_delay_s, 'with no pose ever received: wait this long after '
+                                                       'activation, s', (0.0, 3600.0), live=True),
+    Spec('relocalize.min_interval_s', _S.min_interval_s, 'between two relocalizations, s', (0.0, 3600.0), live=True),
+    Spec('relocalize.max_attempts', _S.max_attempts, 'relocalizations in a row without recovering, then stay lost',
+         (1, 1000), live=True),
+    Spec('relocalize.settle_s', _S.settle_s, 'after publishing, how long the localizer has to take the pose '
+                                             'before it is retried, s', (0.1, 3600.0), live=True),
+    Spec('method', _L.method, f'default matcher: {", ".join(method_names())}', live=True),
+    Spec('angle_step_deg', _L.angle_step_deg, 'rotation step of the template matcher, degrees', limits.ANGLE_STEP_DEG,
+         live=True),
+    Spec('opening_kernel', _L.opening_kernel, 'opening kernel of the local map, pixels (0 = off)', (0, 31),
+         live=True),
+    Spec('covariance_xy', _L.covariance_xy, 'x and y variance published with the thesis matchers, m^2',
+         (1e-6, 100.0), live=True),
+    Spec('covariance_yaw', _L.covariance_yaw, 'yaw variance published with the thesis matchers, rad^2',
+         (1e-6, 10.0), live=True),
+    Spec('laser_x', 0.0, 'laser position on the base, m (used without tf2)', (-100.0, 100.0), live=True),
+    Spec('laser_y', 0.0, 'laser position on the base, m (used without tf2)', (-100.0, 100.0), live=True),
+    Spec('laser_yaw', 0.0, 'laser heading on the base, rad (used without tf2)', (-2 * math.pi, 2 * math.pi),
+         live=True),
+    Spec('laser_roll', 0.0, 'laser roll on the base, rad (used without tf2): pi for a laser mounted upside down; '
+                            'a tilted laser is refused', (-2 * math.pi, 2 * math.pi), live=True),
+    Spec('max_search_s', 5.0, 'seconds a search may take; then the goal ends "search incomplete" with what was '
+                              'explored (a goal always ends)', limits.MAX_SEARCH_S, live=True),
+] + [Spec(f'bnb.{name}', default, f'bnb matcher: {help_text} (applied on configure: a new precomputation)',
+          BNB_RANGES.get(name)) for name, _, default, help_text in option_fields()]
+BY_NAME = {s.name: s for s in SPECS}
 
 
-def declare_server_parameters(node: Node) -> tuple[ServerSettings, LocalizerConfig, SupervisorConfig]:
-    """Declare every parameter on `node` and read them."""
-    defaults = LocalizerConfig()
-    watch = SupervisorConfig()
+class ConfigError(ValueError):
+    """A parameter value the server cannot run with; the message names it."""
 
-    def param(name, value, description, **ranges):
-        return node.declare_parameter(name, value, ParameterDescriptor(description=description, **ranges)).value
 
-    settings = ServerSettings(
-        autostart=param('autostart', True, 'configure and activate on start (false: a lifecycle manager does)'),
-        map_yaml=param('map_yaml', '', 'nav2 map YAML to localize in (empty: the shipped map)') or default_map_yaml(),
-        use_map_topic=param('use_map_topic', False, 'take the map from an OccupancyGrid topic instead of map_yaml'),
-        map_topic=param('map_topic', '/map', 'OccupancyGrid topic (transient local, like nav2 map_server)'),
-        scan_topic=param('scan_topic', '/scan', 'sensor_msgs/LaserScan topic'),
-        initialpose_topic=param('initialpose_topic', '/initialpose', 'where successful poses are published'),
-        scan_timeout_s=param('scan_timeout_s', 5.0, 'how long a goal waits for a fresh scan, s',
-                             **_float_range(0.1, 600.0)),
-        map_frame=param('map_frame', 'map', 'frame of the published pose'),
-        base_frame=param('base_frame', 'base_link', 'robot base frame (for tf2, when available)'),
-        pose_topic=param('pose_topic', '/amcl_pose', "the localizer's pose (PoseWithCovarianceStamped), watched"),
-        odom_topic=param('odom_topic', '/odom', 'nav_msgs/Odometry: moves the watched pose and the hypotheses'),
-        cmd_vel_topic=param('cmd_vel_topic', '/cmd_vel', 'where rotate_in_place turns the robot (Twist)'),
-        rotate_speed=param('rotate_speed', 0.4, 'rotate_in_place turn rate, rad/s', **_float_range(0.05, 2.0)),
-        health_period_s=param('health.period_s', 0.5, 'how often the fit at the watched pose is checked, s',
-                              **_float_range(0.05, 60.0)),
-        relocalize_resolve_by_motion_s=param('relocalize.resolve_by_motion_s', 0.0,
-                                             'automatic relocalization: how long an ambiguous answer may be '
-                                             'followed while the robot moves (0: not)'))
-    supervisor = SupervisorConfig(
-        auto_relocalize=param('auto_relocalize', watch.auto_relocalize,
-                              'relocalize on its own at start (no pose yet) and when lost; publishes poses'),
-        degraded_fit=param('health.degraded_fit', watch.degraded_fit, 'fit below which the state is degraded'),
-        lost_fit=param('health.lost_fit', watch.lost_fit, 'fit below which, for health.lost_after_s, it is lost'),
-        lost_after_s=param('health.lost_after_s', watch.lost_after_s, 'how long the fit must stay low to be lost'),
-        start_delay_s=param('relocalize.start_delay_s', watch.start_delay_s,
-                            'with no pose ever received: wait this long after activation'),
-        min_interval_s=param('relocalize.min_interval_s', watch.min_interval_s, 'between two relocalizations, s'),
-        max_attempts=param('relocalize.max_attempts', watch.max_attempts,
-                           'relocalizations in a row without recovering, then stay lost'),
-        settle_s=param('relocalize.settle_s', watch.settle_s,
-                       'after publishing, how long the localizer has to take the pose, s'))
-    bnb = BranchAndBoundOptions(**{name: param(f'bnb.{name}', default, f'bnb matcher: {help_text}')
-                                   for name, _, default, help_text in option_fields()})
-    config = LocalizerConfig(
-        method=param('method', defaults.method, f'default matcher: {", ".join(method_names())}'),
-        angle_step_deg=param('angle_step_deg', defaults.angle_step_deg,
-                             'rotation step of the template matcher, degrees', **_float_range(0.1, 180.0)),
-        opening_kernel=param('opening_kernel', defaults.opening_kernel,
-                             'opening kernel of the local map, pixels (0 = off)',
-                             integer_range=[IntegerRange(from_value=0, to_value=31, step=1)]),
-        covariance_xy=param('covariance_xy', defaults.covariance_xy,
-                            'x and y variance published with the thesis matchers, m^2', **_float_range(1e-6, 100.0)),
-        covariance_yaw=param('covariance_yaw', defaults.covariance_yaw,
-                             'yaw variance published with the thesis matchers, rad^2', **_float_range(1e-6, 10.0)),
-        base_T_laser=Rigid2D(param('laser_x', 0.0, 'laser position on the base, m (used without tf2)'),
-                             param('laser_y', 0.0, 'laser position on the base, m (used without tf2)'),
-                             param('laser_yaw', 0.0, 'laser heading on the base, rad (used without tf2)')),
-        max_search_s=param('max_search_s', 5.0, 'seconds a search may take; then the goal ends "search '
-                           'incomplete" with what was explored (a goal always ends)', **_float_range(0.01, 1e6)),
-        bnb=bnb)
-    return settings, config, supervisor
+@dataclass(frozen=True)
+class ServerConfig:
+    values: dict                      # parameter name -> value, every parameter
+    localizer: LocalizerConfig
+    supervisor: SupervisorConfig
+
+    def __getitem__(self, name: str):
+        return self.values[name]
+
+    @property
+    def map_yaml(self) -> str:
+        return self.values['map_yaml'] or default_map_yaml()
+
+    def request_defaults(self) -> RequestDefaults:
+        v = self.values
+        return RequestDefaults(v['method'], v['angle_step_deg'], v['scan_timeout_s'])
+
+
+def build_config(values: dict) -> ServerConfig:
+    """The snapshot of `values`; ConfigError naming the first value it cannot run with."""
+    for name, value in values.items():
+        lo_hi = BY_NAME[name].range
+        if lo_hi is not None and not (lo_hi[0] <= value <= lo_hi[1]):
+            raise ConfigError(f'parameter {name}: {value} is outside [{lo_hi[0]}, {lo_hi[1]}]')
+    v = values
+    try:
+        resolve_method(v['method'])
+        bnb = BranchAndBoundOptions(**{name: v[f'bnb.{name}'] for name, *_ in option_fields()})
+    except ValueError as e:
+        raise ConfigError(f'parameter {"method" if "method" in str(e) else "bnb.*"}: {e}') from None
+    localizer = LocalizerConfig(method=v['method'], angle_step_deg=v['angle_step_deg'],
+                                opening_kernel=v['opening_kernel'], covariance_xy=v['covariance_xy'],
+                                covariance_yaw=v['covariance_yaw'],
+                                base_T_laser=Rigid2D(v['laser_x'], v['laser_y'], v['laser_yaw']),
+                                max_search_s=v['max_search_s'], bnb=bnb)
+    supervisor = SupervisorConfig(auto_relocalize=v['auto_relocalize'], degraded_fit=v['health.degraded_fit'],
+                                  lost_fit=v['health.lost_fit'], lost_after_s=v['health.lost_after_s'],
+                                  start_delay_s=v['relocalize.start_delay_s'],
+                                  min_interval_s=v['relocalize.min_interval_s'],
+                                  max_attempts=v['relocalize.max_attempts'], settle_s=v['relocalize.settle_s'])
+    return ServerConfig(dict(values), localizer, supervisor)
+
+
+def _descriptor(spec: Spec) -> ParameterDescriptor:
+    when = 'live' if spec.live else 'applied on configure'
+    d = ParameterDescriptor(description=f'{spec.description} [{when}]')
+    if spec.range is not None:
+        lo, hi = spec.range
+        if isinstance(spec.default, int) and not isinstance(spec.default, bool):
+            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+        else:
+            d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi))]
+    return d
+
+
+def declare_parameters(node) -> dict[str, str]:
+    """Declare every parameter on `node`; returns the problems with the values it was
+    started with, by name (an out-of-range override is declared with its default and
+    reported, so configure fails with the reason instead of the constructor raising)."""
+    problems = {}
+    for spec in SPECS:
+        try:
+            node.declare_parameter(spec.name, spec.default, _descriptor(spec))
+        except InvalidParameterValueException as e:
+            node.declare_parameter(spec.name, spec.default, _descriptor(spec), ignore_override=True)
+            problems[spec.name] = f'parameter {spec.name}: {e}'
+    return problems
+
+
+def read_config(node) -> ServerConfig:
+    """All parameters as they are now (on_configure); ConfigError when one is unusable."""
+    return build_config({spec.name: node.get_parameter(spec.name).value for spec in SPECS})
+
+
+def check_set(current: dict, params, configured: bool) -> SetParametersResult:
+    """The set-parameters callback's answer: a value the server cannot run with is refused
+    with the reason; so is, while configured, one that is read only at configure (the
+    reason says how to apply it: rclpy passes on no reason of a successful set, so a
+    stored-for-later value could not say so); a live one is accepted (`apply_live`)."""
+    values = dict(current)
+    for p in params:
+        if p.name not in BY_NAME:
+            continue
+        if configured and not BY_NAME[p.name].live:
+            return SetParametersResult(successful=False, reason=(
+                f'{p.name}: read at configure, not live - deactivate and clean up the node, set it, configure '
+                f'again'))
+        values[p.name] = p.value
+    try:
+        build_config(values)
+    except ConfigError as e:
+        return SetParametersResult(successful=False, reason=str(e))
+    return SetParametersResult(successful=True)
+
+
+def apply_live(active: ServerConfig, params) -> ServerConfig:
+    """`active` with the live ones of `params` applied (the others wait for configure)."""
+    live = {p.name: p.value for p in params if p.name in BY_NAME and BY_NAME[p.name].live}
+    if not live:
+        return active
+    fresh = build_config({**active.values, **live})
+    return replace(fresh, localizer=replace(fresh.localizer, bnb=active.localizer.bnb))

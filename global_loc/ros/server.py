@@ -1,26 +1,21 @@
 """`ros2 run global_loc server`: the global-localization server, a lifecycle node.
 
-States as in nav2: *configure* loads the map (file or topic) and precomputes the default
-matcher; *activate* serves; *deactivate* stops accepting work (a running localization
-ends canceled); *cleanup* drops the map. With `autostart` (default) it configures and
-activates itself; otherwise a lifecycle manager drives it (`~/change_state`).
+States as in nav2: *configure* reads every parameter (an invalid one: configure fails,
+saying which) and loads the map (file or topic); *activate* serves; *deactivate* stops
+accepting work (a running localization ends canceled); *cleanup* drops the map. With
+`autostart` (default) it configures and activates itself; otherwise a lifecycle manager
+drives it (`~/change_state`). Live parameters apply to the next request (ros/parameters.py).
 
-Three ways to ask, one code path (`serve`), one localization at a time:
-- action `localize` (global_loc_interfaces/action/Localize): feedback, the result with
-  its typed outcome, an optional search prior;
-- `~/trigger` (std_srvs/Trigger): the server's defaults, `success` and a one-line message;
-- `~/reinitialize_global_localization` (std_srvs/Empty): the same, for nav2's
-  ReinitializeGlobalLocalization behaviour-tree node.
-Each takes the first scan that arrives after the request, localizes it, publishes the
-pose on `initialpose_topic` when confident, and shows the hypotheses and the local map
-on `~/hypotheses`, `~/hypothesis_markers`, `~/local_map` (RViz; transient local). Asked
-while not active, busy, or unable, it answers with the outcome and a reason. An ambiguous
-answer can be settled by motion (goal `resolve_by_motion_s`, ros/motion.py); the robot's
-health is watched, and with `auto_relocalize` restored without a request (ros/watch.py).
+Three ways to ask, one path (ros/request_path.py), one localization at a time: action
+`localize` (feedback, typed outcome, search prior), `~/trigger` (std_srvs/Trigger) and
+`~/reinitialize_global_localization` (std_srvs/Empty, nav2's behaviour-tree node); and
+the health watch's own relocalization (`auto_relocalize`, ros/watch.py). docs/ARCHITECTURE.md
+has the threads, locks and hops.
 """
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import threading
 import time
@@ -30,11 +25,10 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped, Twist
 from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
-from rclpy.time import Time
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import String
 from std_srvs.srv import Empty, Trigger
@@ -42,113 +36,139 @@ from visualization_msgs.msg import MarkerArray
 
 from global_loc_interfaces.action import Localize
 
-from ..core.localizer import Localizer, check_angle_step
-from ..core.map_io import MapError, load_map_yaml
-from ..core.matchers import resolve_method
-from ..core.outcome import Cancelled, Outcome
+from ..core.localizer import Localizer
+from ..core.map_io import load_map_yaml
+from ..core.map_slot import MapSlot
+from ..core.motion import pose_fitter
+from ..core.outcome import Outcome
 from ..core.pose_history import PoseHistory
 from ..core.scan import ScanError, scan_to_points
 from ..core.scan_waiter import ScanWaiter
-from ..core.search_region import SearchRegion
-from ..core.transform import Rigid2D, format_pose
-from .convert import (
-    ended_result,
-    map_from_msg,
-    pose_from_msg,
-    quaternion_to_yaw,
-    result_to_msg,
-    scan_from_msg,
-    stamp_seconds,
-)
-from .memory import release_free_memory
+from .convert import map_from_msg, pose_from_msg, scan_from_msg, stamp_seconds
 from .motion import resolve_by_motion
 from .mounting import LaserMounting
 from .node_main import exit_process, run_node
-from .parameters import declare_server_parameters
+from .parameters import BY_NAME, ConfigError, apply_live, check_set, declare_parameters, read_config
+from .request_path import Collaborators, RequestPath, goal_fields, trigger_message
 from .rviz import hypotheses_msg, local_map_msg, markers_msg
-from .watch import LocalizationWatch
+from .watch import HealthWatch
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-def seconds(value: float) -> str:
-    """A duration for a log line: 1.0, 12.5, 1e+308 (not 309 digits)."""
-    return f'{value:.1f}' if value < 1e6 else f'{value:.3g}'
+# /initialpose: reliable and volatile, as AMCL subscribes it (a transient-local pose would
+# reach no volatile subscriber that joins late anyway; the health watch retries instead).
+INITIALPOSE = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+WATCH_METHOD = 'bnb'     # the fit the watch and the motion follower measure is bnb's field (core.motion.pose_fitter)
 
 
 class GlobalLocServer(LifecycleNode):
     def __init__(self):
         super().__init__('global_loc_server')
-        self.settings, self.config, supervisor_config = declare_server_parameters(self)
+        self.start_problems = declare_parameters(self)
+        self.config = None                              # ServerConfig while configured
         self.group = ReentrantCallbackGroup()
-        self.localizer: Localizer | None = None
-        self.map_error = 'no map loaded yet'
-        self.active = False
-        self.stopping = threading.Event()     # set: running work ends (deactivate, cleanup, shutdown)
-        self.busy = threading.Lock()
-        self._in_flight, self._in_flight_lock = 0, threading.Lock()
+        self.maps: MapSlot[Localizer] = MapSlot(self.build_localizer, self.on_map_change)
         self.scans: ScanWaiter[LaserScan] = ScanWaiter()
         self.odom: ScanWaiter[Odometry] = ScanWaiter()        # the newest odometry (has any come?)
         self.odom_history = PoseHistory()                      # odometry by stamp
-        self.watch = LocalizationWatch(self, supervisor_config)
-        self.watch_timer = None
-        self.cmd_vel_pub = self.create_publisher(Twist, self.settings.cmd_vel_topic, 10)
-        self.mounting = LaserMounting(self, self.settings.base_frame, self.config.base_T_laser)
+        self.errors: dict[str, int] = {}                       # callback name -> exceptions caught
         self.pubs: dict = {}
         self.subs: list = []
+        self.own_timers: list = []
+        self.watch = None
+        self.mounting = None
+        self.cmd_vel_pub = None
+        self._in_flight, self._in_flight_lock = 0, threading.Lock()
+        self.path = RequestPath(Collaborators(
+            config=lambda: self.config, maps=self.maps, scans=self.scans,
+            mount=lambda frame: self.mounting.mount(frame), resolve_by_motion=self.resolve_by_motion,
+            publish_pose=lambda msg: self.pubs['initialpose'].publish(msg), show=self.show,
+            clock_now=lambda: self.get_clock().now().nanoseconds * 1e-9, logger=self.get_logger()))
+        self.add_on_set_parameters_callback(self.on_set_parameters)
+        self.add_post_set_parameters_callback(self.on_parameters_set)
         # The action and the services exist in every state, so a request while inactive gets a reason.
         self.action_server = ActionServer(self, Localize, 'localize', self.execute, callback_group=self.group,
-                                          goal_callback=self.on_goal, cancel_callback=self.on_cancel)
-        self.create_service(Trigger, '~/trigger', self.on_trigger, callback_group=self.group)
-        self.create_service(Empty, '~/reinitialize_global_localization', self.on_reinitialize,
+                                          goal_callback=lambda goal: GoalResponse.ACCEPT,
+                                          cancel_callback=self.on_cancel)
+        self.create_service(Trigger, '~/trigger', self.guarded(self.on_trigger), callback_group=self.group)
+        self.create_service(Empty, '~/reinitialize_global_localization', self.guarded(self.on_reinitialize),
                             callback_group=self.group)
-        if self.settings.autostart:
+        self.peer_check = self.create_timer(3.0, self.guarded(self.warn_about_peers), callback_group=self.group)
+        autostart = self.get_parameter('autostart').value
+        if autostart:
             self.trigger_configure()
-            self.trigger_activate()
+            if self.config is not None:
+                self.trigger_activate()
         else:
             self.get_logger().info('unconfigured: waiting for a lifecycle manager (autostart is false)')
 
     # ---- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state) -> TransitionCallbackReturn:
-        """Load the map (or subscribe to it) and precompute; create the publishers and the scan subscription."""
-        s = self.settings
-        self.stopping.clear()
-        reliable = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
-        self.pubs = {'initialpose': self.create_lifecycle_publisher(PoseWithCovarianceStamped, s.initialpose_topic,
-                                                                    reliable),
+        """Read every parameter; create the publishers, subscriptions and timers; load the map."""
+        try:
+            if self.start_problems:
+                raise ConfigError(next(iter(self.start_problems.values())))
+            config = read_config(self)
+        except ConfigError as e:
+            self.path.inactive_reason = f'not configured: {e} (set it and configure again)'
+            self.get_logger().error(f'configure failed: {e}; set it (ros2 param set) and configure again')
+            return TransitionCallbackReturn.FAILURE
+        self.config = config
+        self.path.stopping.clear()
+        if self.mounting is None:        # one tf listener for the node's life
+            self.mounting = LaserMounting(self, config['base_frame'], config.localizer.base_T_laser,
+                                          config['laser_roll'])
+        self.mounting.configure(config['base_frame'], config.localizer.base_T_laser, config['laser_roll'])
+        self.create_interfaces(config)
+        if config['use_map_topic']:
+            self.maps.clear(f'waiting for a map on {config["map_topic"]}')
+            self.get_logger().info(f'waiting for the map on {config["map_topic"]}')
+        else:
+            path = config.map_yaml
+            self.maps.load_now(lambda: load_map_yaml(path))
+        self.path.inactive_reason = 'not active: configured, not yet activated'
+        self.get_logger().info('configured')
+        return TransitionCallbackReturn.SUCCESS
+
+    def create_interfaces(self, config) -> None:
+        g = self.group
+        self.pubs = {'initialpose': self.create_lifecycle_publisher(PoseWithCovarianceStamped,
+                                                                    config['initialpose_topic'], INITIALPOSE),
                      'hypotheses': self.create_lifecycle_publisher(PoseArray, '~/hypotheses', LATCHED),
                      'markers': self.create_lifecycle_publisher(MarkerArray, '~/hypothesis_markers', LATCHED),
                      'local_map': self.create_lifecycle_publisher(OccupancyGrid, '~/local_map', LATCHED),
                      'status': self.create_lifecycle_publisher(String, '~/status', 10),
                      'diagnostics': self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics', 10)}
-        self.subs = [self.create_subscription(LaserScan, s.scan_topic, self.scans.put, qos_profile_sensor_data,
-                                              callback_group=self.group),
-                     self.create_subscription(Odometry, s.odom_topic, self.on_odom, 20, callback_group=self.group),
-                     self.create_subscription(PoseWithCovarianceStamped, s.pose_topic, self.watch.on_pose, 10,
-                                              callback_group=self.group)]
-        self.watch_timer = self.create_timer(s.health_period_s, self.watch.tick, callback_group=self.group)
-        if s.use_map_topic:
-            self.subs.append(self.create_subscription(OccupancyGrid, s.map_topic, self.on_map, LATCHED,
-                                                      callback_group=self.group))
-            self.map_error = f'waiting for a map on {s.map_topic}'
-            self.get_logger().info(f'waiting for the map on {s.map_topic}')
-        else:
-            self.load_map_file(s.map_yaml)
-        self.get_logger().info('configured')
-        return TransitionCallbackReturn.SUCCESS
+        self.cmd_vel_pub = self.create_publisher(Twist, config['cmd_vel_topic'], 10)
+        self.watch = HealthWatch(config.supervisor, config['map_frame'], self.fit_at, self.odom_history,
+                                 self.pubs['status'].publish, self.pubs['diagnostics'].publish,
+                                 lambda: self.get_clock().now().to_msg(), self.get_logger(), self.get_name(),
+                                 extra_values=lambda: {f'errors.{k}': n for k, n in self.errors.items()})
+        self.subs = [self.create_subscription(LaserScan, config['scan_topic'], self.guarded(self.scans.put),
+                                              qos_profile_sensor_data, callback_group=g),
+                     self.create_subscription(Odometry, config['odom_topic'], self.guarded(self.on_odom), 20,
+                                              callback_group=g),
+                     self.create_subscription(PoseWithCovarianceStamped, config['pose_topic'],
+                                              self.guarded(self.watch.on_pose), 10, callback_group=g)]
+        if config['use_map_topic']:
+            # one at a time, in arrival order; the MapSlot builds off the executor and keeps the newest
+            self.subs.append(self.create_subscription(OccupancyGrid, config['map_topic'], self.guarded(self.on_map),
+                                                      LATCHED, callback_group=MutuallyExclusiveCallbackGroup()))
+        self.own_timers = [self.create_timer(config['health.period_s'], self.guarded(self.on_health_tick),
+                                         callback_group=g)]
 
     def on_activate(self, state) -> TransitionCallbackReturn:
-        self.stopping.clear()
-        self.watch.reset()
-        self.active = True
-        s = self.settings
+        self.path.stopping.clear()
+        self.watch.reset(self.config.supervisor)
+        self.path.active = True
+        c = self.config
         self.get_logger().info(f'ready: action "localize", services ~/trigger and ~/reinitialize_global_localization, '
-                               f'scans on {s.scan_topic}, poses to {s.initialpose_topic}, '
-                               f'default method {self.config.method}')
+                               f'scans on {c["scan_topic"]}, poses to {c["initialpose_topic"]}, '
+                               f'default method {c["method"]}')
         return super().on_activate(state)
 
     def on_deactivate(self, state) -> TransitionCallbackReturn:
         self.stop_work()
+        self.path.inactive_reason = 'not active: deactivated'
         self.get_logger().info('deactivated: not accepting work')
         return super().on_deactivate(state)
 
@@ -158,10 +178,13 @@ class GlobalLocServer(LifecycleNode):
             self.destroy_lifecycle_publisher(pub)
         for sub in self.subs:
             self.destroy_subscription(sub)
-        if self.watch_timer is not None:
-            self.destroy_timer(self.watch_timer)
-        self.pubs, self.subs, self.watch_timer = {}, [], None
-        self.localizer, self.map_error = None, 'no map loaded (cleaned up)'
+        for timer in self.own_timers:
+            self.destroy_timer(timer)
+        if self.cmd_vel_pub is not None:
+            self.destroy_publisher(self.cmd_vel_pub)
+        self.pubs, self.subs, self.own_timers, self.cmd_vel_pub, self.config = {}, [], [], None, None
+        self.maps.clear('no map loaded (cleaned up)')
+        self.path.inactive_reason = 'not active: cleaned up (configure it again)'
         self.get_logger().info('cleaned up: map dropped')
         return TransitionCallbackReturn.SUCCESS
 
@@ -172,47 +195,119 @@ class GlobalLocServer(LifecycleNode):
     def stop_work(self, timeout: float = 2.0) -> None:
         """Stop accepting work and end a running localization (canceled); wait for it to end."""
         self.wind_down()
-        if self.busy.acquire(timeout=timeout):
-            self.busy.release()
+        if self.path.busy.acquire(timeout=timeout):
+            self.path.busy.release()
 
-    # ---- map and laser mounting --------------------------------------------------------------
-    def load_map_file(self, path: str) -> None:
-        try:
-            self.set_map(load_map_yaml(path))
-        except MapError as e:
-            self.map_error = f'map not loaded: {e}'
-            self.get_logger().error(f'{self.map_error}; requests are refused until a map is available')
+    def wind_down(self):
+        """run_node's first step on SIGINT/SIGTERM, while the executor still spins: stop
+        accepting work and end what runs (a goal ends canceled, "the server is stopping");
+        returns whether it is all over."""
+        self.path.active = False
+        self.path.stopping.set()
+        return lambda: self._in_flight == 0
 
-    def set_map(self, occupancy_map) -> None:
-        """Use `occupancy_map` from now on, with the default matcher precomputed now, not in the first request."""
-        localizer = Localizer(occupancy_map, self.config)
-        try:
-            t0 = time.perf_counter()
-            localizer.matcher(self.config.method)
-            self.get_logger().info(f'map {occupancy_map.source}: {occupancy_map.width} x {occupancy_map.height} '
-                                   f'cells at {occupancy_map.resolution} m; {self.config.method} ready in '
-                                   f'{time.perf_counter() - t0:.2f} s')
-        except ValueError as e:      # an unknown method (MethodError), bad bnb.* options
-            self.get_logger().error(f'default method {self.config.method}: {e}')
-        self.localizer = localizer
+    def close(self) -> None:
+        self.maps.close()
+
+    # ---- parameters ----------------------------------------------------------------------
+    def on_set_parameters(self, params):
+        """Refuse what the server cannot run with, and while configured what it reads only at
+        configure (the reasons say why); live ones apply to the next request."""
+        current = self.config.values if self.config is not None else \
+            {name: self.get_parameter(name).value for name in BY_NAME}
+        return check_set(current, params, configured=self.config is not None)
+
+    def on_parameters_set(self, params) -> None:
+        for p in params:
+            self.start_problems.pop(p.name, None)     # a corrected value: the next configure reads it
+        if self.config is None:
+            return
+        self.config = apply_live(self.config, params)
+        if self.watch is not None:
+            self.watch.reconfigure(self.config.supervisor)
+        self.mounting.configure(self.config['base_frame'], self.config.localizer.base_T_laser,
+                                self.config['laser_roll'])
+        names = ', '.join(f'{p.name}={p.value}' for p in params)
+        self.get_logger().info(f'parameters set: {names}')
+
+    # ---- maps, odometry, health -------------------------------------------------------------
+    def build_localizer(self, load) -> Localizer:
+        """The map `load()` gives, with the default method (and bnb, for the watch's fit)
+        precomputed now - in the map builder, not in the first request or health tick."""
+        config = self.config
+        occupancy_map = load()
+        localizer = Localizer(occupancy_map, config.localizer)
+        t0 = time.perf_counter()
+        for method in dict.fromkeys((config['method'], WATCH_METHOD)):
+            localizer.matcher(method)
+        self.get_logger().info(f'map {occupancy_map.source}: {occupancy_map.width} x {occupancy_map.height} cells '
+                               f'at {occupancy_map.resolution} m; {config["method"]} ready in '
+                               f'{time.perf_counter() - t0:.2f} s')
+        return localizer
+
+    def on_map_change(self, installed, note: str, dropped: bool) -> None:
+        if installed.built is None and not dropped:
+            self.get_logger().error(f'{note}; requests are refused until a map is available')
+        else:
+            self.get_logger().info(note)
+
+    def on_map(self, msg: OccupancyGrid) -> None:
+        """A map from the map topic: the newest received is used once it is prepared."""
+        generation = self.maps.submit(lambda: map_from_msg(msg))
+        self.get_logger().info(f'map {generation} received on {self.config["map_topic"]}: '
+                               f'{msg.info.width} x {msg.info.height} cells')
 
     def on_odom(self, msg: Odometry) -> None:
         self.odom_history.add(stamp_seconds(msg.header.stamp), pose_from_msg(msg.pose.pose))
         self.odom.put(msg)
 
-    def on_map(self, msg: OccupancyGrid) -> None:
-        """A new map from the map topic replaces the current one (a running localization keeps its own)."""
+    def fit_at(self, scan_msg, pose):
+        """The watch's fit of a scan at a base pose (None while no map is ready)."""
+        localizer = self.maps.current().built
+        if localizer is None:
+            return None
         try:
-            self.set_map(map_from_msg(msg))
-        except MapError as e:
-            self.map_error = f'map not loaded: {e}'
-            self.get_logger().error(self.map_error)
+            mount = self.mounting.mount(scan_msg.header.frame_id)
+            points = scan_to_points(mount.upright(scan_from_msg(scan_msg)))
+        except ScanError:
+            return None
+        return pose_fitter(localizer.matcher(WATCH_METHOD), points, mount.base_T_laser)(pose)[0]
+
+    def on_health_tick(self) -> None:
+        if not self.path.active:
+            return
+        reason = self.watch.tick(self.scans.latest())
+        if reason:
+            self.get_logger().warn(f'relocalizing on its own: {reason}')
+            threading.Thread(target=self.relocalize, daemon=True, name='relocalize').start()
+
+    def relocalize(self) -> None:
+        fields = dict(resolve_by_motion_s=self.config['relocalize.resolve_by_motion_s'])
+        with self.in_flight():
+            result = self.path.serve(fields, 'relocalization')
+        self.get_logger().info(f'relocalization: {Outcome(result.outcome).label}: {result.message}')
+        self.watch.finished(Outcome(result.outcome), published=bool(result.success))
+
+    def resolve_by_motion(self, result, msg, base_T_laser, request, localizer, cancelled, feedback):
+        c = self.config
+        return resolve_by_motion(
+            result, msg, base_T_laser, request.resolve_by_motion_s, request.rotate_in_place, localizer=localizer,
+            scans=self.scans, odometry=self.odom_history,
+            odometry_arrived=lambda timeout_s: self.odom.wait_after(0.0, timeout_s, cancelled) is not None,
+            publish_cmd_vel=self.cmd_vel_pub.publish, rotate_speed=c['rotate_speed'], odom_topic=c['odom_topic'],
+            cancelled=cancelled, feedback=feedback, log=self.get_logger().info)
+
+    def show(self, result, scan, base_T_laser, stamp, occupancy_map) -> None:
+        """The RViz topics for this localization."""
+        frame = self.config['map_frame']
+        self.pubs['hypotheses'].publish(hypotheses_msg(result, frame, stamp))
+        self.pubs['markers'].publish(markers_msg(result, frame, stamp))
+        if result.pose is not None:
+            self.pubs['local_map'].publish(local_map_msg(scan_to_points(scan), occupancy_map.resolution,
+                                                         self.config['opening_kernel'], result.pose * base_T_laser,
+                                                         frame, stamp, occupancy_map.diagonal_m))
 
     # ---- requests -------------------------------------------------------------------------
-    def on_goal(self, goal_request) -> GoalResponse:
-        """Accept every goal; serve() ends it with an outcome if it cannot run."""
-        return GoalResponse.ACCEPT
-
     def on_cancel(self, goal_handle) -> CancelResponse:
         """Accept every cancel; the search stops at its next progress report."""
         self.get_logger().info('cancel requested')
@@ -220,7 +315,7 @@ class GlobalLocServer(LifecycleNode):
 
     @contextlib.contextmanager
     def in_flight(self):
-        """Counts a request (goal or service call) until its handler returns (wind_down waits for none)."""
+        """Counts a request (goal, service call, relocalization) until its handler returns."""
         with self._in_flight_lock:
             self._in_flight += 1
         try:
@@ -229,24 +324,11 @@ class GlobalLocServer(LifecycleNode):
             with self._in_flight_lock:
                 self._in_flight -= 1
 
-    def wind_down(self):
-        """run_node's first step on SIGINT/SIGTERM, while the executor still spins: stop
-        accepting work and end what runs (a goal ends canceled, "the server is stopping");
-        returns whether it is all over."""
-        self.active = False
-        self.stopping.set()
-        return lambda: self._in_flight == 0
-
     def execute(self, goal_handle):
         """The action: serve the goal, then end it as its outcome says."""
         with self.in_flight():
-            return self._execute(goal_handle)
-
-    def _execute(self, goal_handle):
-        result = self.serve(goal_handle.request, lambda: goal_handle.is_cancel_requested,
-                            lambda progress, stage, best, hypotheses=0: goal_handle.publish_feedback(
-                                Localize.Feedback(progress=float(progress), stage=stage, hypotheses=int(hypotheses),
-                                                  best_score=float(best) if math.isfinite(best) else 0.0)))
+            result = self.path.serve(goal_fields(goal_handle.request), 'goal', lambda: goal_handle.is_cancel_requested,
+                                     functools.partial(publish_feedback, goal_handle))
         if result.outcome == Outcome.LOCALIZED:
             goal_handle.succeed()
         elif result.outcome == Outcome.CANCELED and goal_handle.is_cancel_requested:
@@ -258,115 +340,48 @@ class GlobalLocServer(LifecycleNode):
     def on_trigger(self, request, response):
         """std_srvs/Trigger: localize the next scan with the defaults; the outcome in one line."""
         with self.in_flight():
-            result = self.serve(Localize.Goal(publish_initialpose=True))
+            result = self.path.serve({}, 'trigger')
         response.success = bool(result.success)
-        response.message = f'{Outcome(result.outcome).label}: {result.message}'
-        if len(result.hypotheses.poses):
-            p = result.pose.pose.pose
-            pose = Rigid2D(p.position.x, p.position.y, quaternion_to_yaw(p.orientation))
-            response.message += f'; {format_pose(pose)}, confidence {result.confidence:.2f}'
+        pose = pose_from_msg(result.pose.pose.pose) if len(result.hypotheses.poses) else None
+        response.message = trigger_message(result, pose)
         return response
 
     def on_reinitialize(self, request, response):
         """std_srvs/Empty (nav2's ReinitializeGlobalLocalization): the same as ~/trigger."""
         with self.in_flight():
-            self.serve(Localize.Goal(publish_initialpose=True))
+            self.path.serve({}, 'reinitialize')
         return response
 
-    def serve(self, goal, cancelled=lambda: False, feedback=lambda *args: None) -> Localize.Result:
-        """One localization, whoever asked; never raises: every end is an outcome."""
-        if not self.active:
-            return self.refuse(Outcome.NOT_ACTIVE, 'not active: the server is not in the active lifecycle state')
-        if not self.busy.acquire(blocking=False):
-            return self.refuse(Outcome.BUSY, 'busy: another localization is running (one at a time); retry when '
-                                             'it ends')
-        try:
-            return self.localize(goal, lambda: cancelled() or self.stopping.is_set(), feedback)
-        except Cancelled:
-            reason = 'canceled' if not self.stopping.is_set() else 'canceled: the server is stopping'
-            self.get_logger().info(reason)
-            return ended_result(Outcome.CANCELED, reason)
-        except Exception as e:   # an internal error must end this request, not the node
-            self.get_logger().error(f'internal error: {e}\n{traceback.format_exc()}')
-            return ended_result(Outcome.INTERNAL_ERROR, f'internal error: {type(e).__name__}: {e}')
-        finally:
-            self.busy.release()
-            release_free_memory()
+    # ---- guards ----------------------------------------------------------------------------
+    def guarded(self, callback):
+        """`callback` for a timer, subscription or service: an exception is logged (throttled),
+        counted on /diagnostics, and the node keeps spinning."""
+        name = getattr(callback, '__name__', 'callback')
 
-    def refuse(self, outcome: Outcome, message: str) -> Localize.Result:
-        self.get_logger().warn(f'refused: {message}')
-        return ended_result(outcome, message)
+        @functools.wraps(callback)
+        def run(*args):
+            try:
+                return callback(*args)
+            except Exception as e:
+                self.errors[name] = self.errors.get(name, 0) + 1
+                self.get_logger().error(f'{name} failed ({self.errors[name]} so far): {type(e).__name__}: {e}\n'
+                                        f'{traceback.format_exc()}', throttle_duration_sec=10.0)
+                return args[1] if len(args) == 2 else None     # a service still answers (its response)
+        return run
 
-    def localize(self, goal, cancelled, feedback) -> Localize.Result:
-        start = time.monotonic()
-        localizer = self.localizer
-        if localizer is None:
-            return self.refuse(Outcome.NO_MAP, self.map_error)
-        method = goal.method or self.config.method
-        try:
-            resolve_method(method)
-            check_angle_step(goal.angle_step_deg or self.config.angle_step_deg)
-            c = goal.search_center
-            region = SearchRegion(Rigid2D(c.x, c.y, c.theta), goal.search_radius_m,
-                                  math.radians(goal.search_yaw_tolerance_deg))
-        except ValueError as e:    # MethodError is one
-            return self.refuse(Outcome.BAD_GOAL, str(e))
-        timeout = goal.timeout_s if goal.timeout_s > 0 else self.settings.scan_timeout_s
-        topic = self.settings.scan_topic
-        self.get_logger().info(f'localizing: method {method}, waiting up to {seconds(timeout)} s for a scan on {topic}')
-        feedback(0.0, 'waiting_for_scan', 0.0)
-        msg = self.scans.wait_after(start, timeout, cancelled)
-        if msg is None:
-            return self.refuse(Outcome.NO_SCAN, f'no scan on {topic} within {seconds(timeout)} s')
-        feedback(0.05, 'preparing_scan', 0.0)   # local map or points, per method
-        self.get_logger().info(f'matching a scan of {len(msg.ranges)} beams')
-        last = [0.0]
+    def warn_about_peers(self) -> None:
+        """Once, a few seconds after start: another global_loc server on this domain would
+        execute every goal too (both publish poses)."""
+        self.peer_check.cancel()
+        peers = [ns for name, ns in self.get_node_names_and_namespaces() if name == self.get_name()]
+        if len(peers) > 1:
+            self.get_logger().error(f'{len(peers)} nodes named {self.get_name()} on this ROS domain: each executes '
+                                    f'every goal and publishes its poses; run one per domain or rename one')
 
-        def progress(fraction, best):      # cancel between search steps; at most ~10 feedback messages a second
-            if cancelled():
-                raise Cancelled()
-            if time.monotonic() - last[0] > 0.1 or fraction >= 1.0:
-                last[0] = time.monotonic()
-                feedback(0.05 + 0.9 * fraction, 'matching', best)
 
-        base_T_laser = self.mounting.base_T_laser(msg.header.frame_id)
-        try:
-            scan = scan_from_msg(msg)
-            result = localizer.localize(scan, method=method, angle_step_deg=goal.angle_step_deg or None,
-                                        progress=progress, base_T_laser=base_T_laser, region=region)
-        except ScanError as e:
-            return self.refuse(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
-        if result.outcome == Outcome.AMBIGUOUS and goal.resolve_by_motion_s > 0:
-            result, msg = resolve_by_motion(
-                result, msg, base_T_laser, goal.resolve_by_motion_s, goal.rotate_in_place, localizer=localizer,
-                scans=self.scans, odometry=self.odom_history,
-                odometry_arrived=lambda timeout_s: self.odom.wait_after(0.0, timeout_s, cancelled) is not None,
-                publish_cmd_vel=self.cmd_vel_pub.publish, rotate_speed=self.settings.rotate_speed,
-                odom_topic=self.settings.odom_topic, cancelled=cancelled, feedback=feedback,
-                log=self.get_logger().info)
-            scan = scan_from_msg(msg)      # the poses are the robot's at the last scan used
-        out = result_to_msg(result, self.settings.map_frame, msg.header.stamp, time.monotonic() - start)
-        out.scan_stamp = msg.header.stamp
-        out.scan_age_s = (self.get_clock().now() - Time.from_msg(msg.header.stamp)).nanoseconds * 1e-9
-        self.show(result, scan, base_T_laser, msg.header.stamp, localizer.map)
-        summary = result.message
-        if result.pose is not None:
-            summary += f': {format_pose(result.pose)}, score {result.score:.3f}, {result.time_s:.2f} s'
-            if goal.publish_initialpose and (result.success or goal.publish_if_ambiguous):
-                self.pubs['initialpose'].publish(out.pose)
-                summary += f'; published on {self.settings.initialpose_topic}'
-        self.get_logger().info(summary)
-        return out
-
-    def show(self, result, scan, base_T_laser: Rigid2D, stamp, occupancy_map) -> None:
-        """The RViz topics for this localization."""
-        frame = self.settings.map_frame
-        self.pubs['hypotheses'].publish(hypotheses_msg(result, frame, stamp))
-        self.pubs['markers'].publish(markers_msg(result, frame, stamp))
-        if result.pose is not None:
-            self.pubs['local_map'].publish(local_map_msg(scan_to_points(scan), occupancy_map.resolution,
-                                                         self.config.opening_kernel, result.pose * base_T_laser,
-                                                         frame, stamp, occupancy_map.diagonal_m))
+def publish_feedback(goal_handle, progress, stage, best, hypotheses=0) -> None:
+    goal_handle.publish_feedback(Localize.Feedback(progress=float(progress), stage=stage, hypotheses=int(hypotheses),
+                                                   best_score=float(best) if math.isfinite(best) else 0.0))
 
 
 def main(args=None):

@@ -1,93 +1,110 @@
-"""Keeping a robot localized: the server follows the pose the localizer believes (its
-`pose_topic`, moved forward by odometry between updates), checks the newest scan's fit
-there every `health.period_s`, and publishes the state (core.supervisor.Health) on
-/diagnostics and `~/status`. With `auto_relocalize`, it runs a global localization on
-its own when it has never had a pose, or when the robot is lost, and publishes the pose
-when confident - with the supervisor's guards (interval, attempts, waiting for the
-localizer to take the pose)."""
+"""Keeping a robot localized: follow the pose the localizer believes (its `pose_topic`,
+moved forward by odometry between updates), check the newest scan's fit there every
+`health.period_s`, publish the state (core.supervisor.Health) on /diagnostics and
+`~/status`, and say when a relocalization is due (`auto_relocalize`, with the
+supervisor's guards). The watch never starts one itself: `tick` returns the reason and
+the server runs it through its one request path, then reports the end (`finished`).
+
+It gets what it needs passed in - a fit function, the odometry, publish callables, a
+logger - and reads nobody's fields, so it is tested without a node.
+"""
 from __future__ import annotations
 
 import threading
 import time
+from typing import Callable, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from std_msgs.msg import String
 
-from global_loc_interfaces.action import Localize
-
-from ..core.motion import pose_fitter
 from ..core.outcome import Outcome
-from ..core.scan import ScanError, scan_to_points
+from ..core.pose_history import PoseHistory
 from ..core.supervisor import Health, Supervisor, SupervisorConfig
-from .convert import pose_from_msg, scan_from_msg, stamp_seconds
+from ..core.transform import Rigid2D
+from .convert import pose_from_msg, stamp_seconds
 
 LEVELS = {Health.LOCALIZED: DiagnosticStatus.OK, Health.LOST: DiagnosticStatus.ERROR}
+WARN_EVERY_S = 10.0
+# A relocalization that ended so never looked at a scan: not an attempt (supervisor).
+NOT_COUNTED = {Outcome.NO_SCAN, Outcome.NOT_ACTIVE, Outcome.CANCELED, Outcome.BUSY, Outcome.NO_MAP}
+
+# (scan message, robot base pose in the map) -> fit in 0..1, or None when it cannot be computed now
+FitFn = Callable[[object, Rigid2D], Optional[float]]
 
 
-class LocalizationWatch:
-    def __init__(self, node, config: SupervisorConfig):
-        self.node = node
-        self.config = config
-        self.supervisor = Supervisor(config, time.monotonic())
-        self.belief = None        # (pose from the localizer, its stamp)
+class HealthWatch:
+    def __init__(self, config: SupervisorConfig, map_frame: str, fit: FitFn, odometry: PoseHistory,
+                 publish_status: Callable[[String], None], publish_diagnostics: Callable[[DiagnosticArray], None],
+                 now_msg: Callable[[], object], logger, name: str, extra_values: Callable[[], dict] = dict,
+                 clock: Callable[[], float] = time.monotonic):
+        self.config, self.map_frame, self.fit, self.odometry = config, map_frame, fit, odometry
+        self.publish_status, self.publish_diagnostics, self.now_msg = publish_status, publish_diagnostics, now_msg
+        self.logger, self.name, self.extra_values, self.clock = logger, name, extra_values, clock
         self.lock = threading.Lock()
+        self.supervisor = Supervisor(config, clock())
+        self.belief: Optional[tuple[Rigid2D, float]] = None      # (localizer's pose, its stamp)
 
-    def reset(self) -> None:
-        """A fresh start (on activation)."""
+    def reset(self, config: Optional[SupervisorConfig] = None) -> None:
+        """A fresh start (activation), with `config` when it changed."""
         with self.lock:
-            self.supervisor = Supervisor(self.config, time.monotonic())
+            self.config = config or self.config
+            self.supervisor = Supervisor(self.config, self.clock())
             self.belief = None
 
-    def on_pose(self, msg) -> None:
-        """The localizer's pose: follow it from here."""
+    def reconfigure(self, config: SupervisorConfig) -> None:
+        """New thresholds and guards (a live parameter change); the state is kept."""
         with self.lock:
-            self.belief = (pose_from_msg(msg.pose.pose), stamp_seconds(msg.header.stamp))
-            self.supervisor.on_pose(time.monotonic())
+            self.config = self.supervisor.config = config
 
-    def believed_pose(self, stamp: float):
+    def on_pose(self, msg) -> None:
+        """The localizer's pose: follow it from here. One in another frame than the map is
+        not comparable and is ignored; one stamped 0 is taken as of the newest odometry
+        (a zero stamp would apply all the stored odometry as motion)."""
+        frame = msg.header.frame_id
+        if frame and frame.lstrip('/') != self.map_frame.lstrip('/'):
+            self.logger.warn(f'ignoring a localizer pose in frame "{frame}" (not "{self.map_frame}")',
+                             throttle_duration_sec=WARN_EVERY_S)
+            return
+        stamp = stamp_seconds(msg.header.stamp)
+        if stamp == 0.0:
+            self.logger.warn('localizer pose stamped 0: taken as of the newest odometry',
+                             throttle_duration_sec=WARN_EVERY_S)
+            stamp = self.odometry.newest_stamp() or 0.0
+        with self.lock:
+            self.belief = (pose_from_msg(msg.pose.pose), stamp)
+            self.supervisor.on_pose(self.clock())
+
+    def believed_pose(self, stamp: float) -> Optional[Rigid2D]:
         """The localizer's last pose moved by the odometry to `stamp`, or None."""
         with self.lock:
             if self.belief is None:
                 return None
             pose, since = self.belief
-        motion = self.node.odom_history.motion(since, stamp)
+        motion = self.odometry.motion(since, stamp)
         return pose if motion is None else pose * motion
 
-    def tick(self) -> None:
-        """Check the fit, publish the state, start a relocalization when one is due."""
-        node = self.node
-        if not node.active or node.localizer is None:
-            return
-        now = time.monotonic()
-        msg = node.scans.latest()
-        pose = None if msg is None else self.believed_pose(stamp_seconds(msg.header.stamp))
-        if pose is not None:
-            try:
-                points = scan_to_points(scan_from_msg(msg))
-                fit, _ = pose_fitter(node.localizer.matcher('bnb'), points,
-                                     node.mounting.base_T_laser(msg.header.frame_id))(pose)
-                with self.lock:
-                    self.supervisor.on_fit(now, fit)
-            except ScanError:
-                pass
-        self.publish()
+    def tick(self, scan_msg) -> Optional[str]:
+        """Check the fit of `scan_msg` (the newest scan, None before the first), publish the
+        state; the reason a relocalization should start now (it is then counted as
+        started), or None."""
+        now = self.clock()
+        pose = None if scan_msg is None else self.believed_pose(stamp_seconds(scan_msg.header.stamp))
+        fit = None if pose is None else self.fit(scan_msg, pose)
         with self.lock:
-            reason = self.supervisor.should_relocalize(now)
+            if fit is not None:
+                self.supervisor.on_fit(now, fit)
+            reason = self.supervisor.should_relocalize(now, scan_arrived=scan_msg is not None)
             if reason:
                 self.supervisor.started_relocalization(now)
-        if reason:
-            node.get_logger().warn(f'relocalizing on its own: {reason}')
-            self.publish()
-            threading.Thread(target=self.relocalize, daemon=True, name='relocalize').start()
+        self.publish()
+        return reason
 
-    def relocalize(self) -> None:
-        node = self.node
-        result = node.serve(Localize.Goal(publish_initialpose=True,
-                                          resolve_by_motion_s=node.settings.relocalize_resolve_by_motion_s))
+    def finished(self, outcome: Outcome, published: bool) -> None:
+        """The relocalization `tick` asked for ended so."""
         with self.lock:
-            self.supervisor.finished_relocalization(time.monotonic(), published=bool(result.success),
-                                                    ambiguous=result.outcome == Outcome.AMBIGUOUS)
-        node.get_logger().info(f'relocalization: {Outcome(result.outcome).label}: {result.message}')
+            self.supervisor.finished_relocalization(self.clock(), published=published,
+                                                    ambiguous=outcome == Outcome.AMBIGUOUS,
+                                                    counted=outcome not in NOT_COUNTED)
         self.publish()
 
     def publish(self) -> None:
@@ -95,12 +112,12 @@ class LocalizationWatch:
             s = self.supervisor
             health, fit, note, attempts = s.health, s.fit, s.note, s.attempts
         text = health.value + ('' if fit is None else f' fit={fit:.2f}') + (f' ({note})' if note else '')
-        self.node.pubs['status'].publish(String(data=text))
+        self.publish_status(String(data=text))
         status = DiagnosticStatus(level=LEVELS.get(health, DiagnosticStatus.WARN), name='global_loc: localization',
-                                  message=text, hardware_id=self.node.get_name())
-        status.values = [KeyValue(key='state', value=health.value),
-                         KeyValue(key='fit', value='' if fit is None else f'{fit:.3f}'),
-                         KeyValue(key='relocalizations', value=str(attempts))]
+                                  message=text, hardware_id=self.name)
+        values = {'state': health.value, 'fit': '' if fit is None else f'{fit:.3f}',
+                  'relocalizations': str(attempts), **self.extra_values()}
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         array = DiagnosticArray(status=[status])
-        array.header.stamp = self.node.get_clock().now().to_msg()
-        self.node.pubs['diagnostics'].publish(array)
+        array.header.stamp = self.now_msg()
+        self.publish_diagnostics(array)

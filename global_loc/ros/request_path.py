@@ -1,0 +1,183 @@
+"""One localization, whoever asked, in one direction: admit (active? busy?) -> validate
+(a core Request, defaults resolved once) -> localize (the newest map, the first scan after
+the request, converted once; motion when asked) -> publish (only a pose the server can
+vouch for, in the map that is still current). Every end is an outcome; nothing here
+raises to the executor.
+
+`RequestPath` gets its collaborators passed in (`Collaborators`); it reads no node's fields.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+import traceback
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+from global_loc_interfaces.action import Localize
+
+from ..core.map_slot import MapSlot
+from ..core.mount import LaserMount
+from ..core.outcome import Cancelled, Outcome
+from ..core.request import Request, RequestError, make_request
+from ..core.scan import ScanError
+from ..core.scan_waiter import ScanWaiter
+from ..core.transform import Rigid2D, format_pose
+from .convert import ended_result, result_to_msg, scan_from_msg, stamp_seconds
+from .memory import release_free_memory
+
+CLOCKS_APART_S = 3600.0     # a scan stamped this far from the node's clock: use_sim_time set wrong?
+
+
+def seconds(value: float) -> str:
+    """A duration for a log line: 1.0, 12.5, 1e+308 (not 309 digits)."""
+    return f'{value:.1f}' if value < 1e6 else f'{value:.3g}'
+
+
+@dataclass
+class Collaborators:
+    config: Callable[[], object]                 # -> the current ros.parameters.ServerConfig
+    maps: MapSlot                                # of Localizer
+    scans: ScanWaiter                            # of LaserScan
+    mount: Callable[[str], LaserMount]           # laser frame -> its mounting on the base (MountError)
+    resolve_by_motion: Callable                  # (result, msg, base_T_laser, request, localizer, cancelled, feedback)
+    publish_pose: Callable[[object], None]       # PoseWithCovarianceStamped -> initialpose_topic
+    show: Callable                               # (result, scan, base_T_laser, stamp, map) -> RViz topics
+    clock_now: Callable[[], float]               # the node's clock (sim time with use_sim_time), s
+    logger: object
+
+
+class RequestPath:
+    def __init__(self, c: Collaborators):
+        self.c = c
+        self.active = False
+        self.stopping = threading.Event()       # set: running work ends (deactivate, cleanup, shutdown)
+        self.busy = threading.Lock()
+
+    # ---- admit and validate ------------------------------------------------------------
+    def serve(self, fields: dict, origin: str, cancelled=lambda: False, feedback=lambda *a: None) -> Localize.Result:
+        """One request (`fields`: make_request's keywords); never raises."""
+        if not self.active:
+            return self.refuse(Outcome.NOT_ACTIVE, self.inactive_reason)
+        if not self.busy.acquire(blocking=False):
+            return self.refuse(Outcome.BUSY, 'busy: another localization is running (one at a time); retry when '
+                                             'it ends', throttle=True)
+        try:
+            request = make_request(self.c.config().request_defaults(), origin=origin, **fields)
+            return self.run(request, lambda: cancelled() or self.stopping.is_set(), feedback)
+        except RequestError as e:
+            return self.refuse(Outcome.BAD_GOAL, f'bad request: {e}')
+        except Cancelled:
+            reason = 'canceled' if not self.stopping.is_set() else 'canceled: the server is stopping'
+            self.c.logger.info(reason)
+            return ended_result(Outcome.CANCELED, reason)
+        except Exception as e:   # an internal error must end this request, not the node
+            self.c.logger.error(f'internal error: {e}\n{traceback.format_exc()}')
+            return ended_result(Outcome.INTERNAL_ERROR, f'internal error: {type(e).__name__}: {e}')
+        finally:
+            self.busy.release()
+            release_free_memory()
+
+    inactive_reason = 'not active: the server is not in the active lifecycle state'
+
+    def refuse(self, outcome: Outcome, message: str, throttle: bool = False) -> Localize.Result:
+        self.c.logger.warn(f'refused: {message}', **({'throttle_duration_sec': 5.0} if throttle else {}))
+        return ended_result(outcome, message)
+
+    # ---- localize ---------------------------------------------------------------------
+    def run(self, request: Request, cancelled, feedback) -> Localize.Result:
+        start = time.monotonic()
+        maps = self.c.maps.wait_current(request.scan_timeout_s, cancelled)   # a newer map may be building
+        if maps.built is None or not self.c.maps.is_current(maps.generation):
+            return self.refuse(Outcome.NO_MAP, maps.error or 'a newer map is still being prepared; retry')
+        localizer = maps.built.reconfigured(self.c.config().localizer)
+        msg = self.wait_for_scan(request, start, cancelled, feedback)
+        if msg is None:
+            return self.refuse(Outcome.NO_SCAN, f'no scan on {self.c.config()["scan_topic"]} within '
+                                                f'{seconds(request.scan_timeout_s)} s')
+        try:
+            mount = self.c.mount(msg.header.frame_id)
+            base_T_laser = mount.base_T_laser
+            result = localizer.localize(mount.upright(scan_from_msg(msg)), method=request.method,
+                                        angle_step_deg=request.angle_step_deg, progress=self.progress(
+                                            cancelled, feedback), base_T_laser=base_T_laser, region=request.region)
+        except ScanError as e:
+            return self.refuse(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
+        if result.outcome == Outcome.AMBIGUOUS and request.resolve_by_motion_s > 0:
+            result, msg = self.c.resolve_by_motion(result, msg, base_T_laser, request, localizer, cancelled,
+                                                   feedback)
+        return self.publish(request, result, msg, mount, maps.generation, localizer.map, start)
+
+    def wait_for_scan(self, request: Request, start: float, cancelled, feedback):
+        self.c.logger.info(f'localizing ({request.origin}): method {request.method}, waiting up to '
+                           f'{seconds(request.scan_timeout_s)} s for a scan on {self.c.config()["scan_topic"]}')
+        feedback(0.0, 'waiting_for_scan', 0.0)
+        msg = self.c.scans.wait_after(start, request.scan_timeout_s, cancelled)
+        if msg is not None:
+            feedback(0.05, 'preparing_scan', 0.0)   # local map or points, per method
+            self.c.logger.info(f'matching a scan of {len(msg.ranges)} beams')
+        return msg
+
+    @staticmethod
+    def progress(cancelled, feedback):
+        """The matchers' progress callback: cancel between search steps; at most ~10
+        feedback messages a second."""
+        last = [0.0]
+
+        def report(fraction, best):
+            if cancelled():
+                raise Cancelled()
+            if time.monotonic() - last[0] > 0.1 or fraction >= 1.0:
+                last[0] = time.monotonic()
+                feedback(0.05 + 0.9 * fraction, 'matching', best)
+        return report
+
+    # ---- publish ------------------------------------------------------------------------
+    def publish(self, request: Request, result, msg, mount: LaserMount, generation: int, occupancy_map,
+                start: float) -> Localize.Result:
+        """The action result; the pose on /initialpose when it is confident (or asked for
+        anyway) and its map is still the newest received."""
+        config = self.c.config()
+        out = result_to_msg(result, config['map_frame'], msg.header.stamp, time.monotonic() - start)
+        out.scan_stamp = msg.header.stamp
+        out.scan_age_s = self.scan_age(msg)
+        self.c.show(result, mount.upright(scan_from_msg(msg)), mount.base_T_laser, msg.header.stamp, occupancy_map)
+        summary = result.message
+        if result.pose is not None:
+            summary += f': {format_pose(result.pose)}, score {result.score:.3f}, {result.time_s:.2f} s'
+            wanted = request.publish and (result.success or request.publish_if_ambiguous)
+            if wanted and not self.c.maps.is_current(generation):
+                return self.refuse(Outcome.NO_MAP, f'not published: a newer map arrived while localizing in map '
+                                                   f'{generation} (its pose would be in the old map); retry')
+            if wanted:
+                self.c.publish_pose(out.pose)
+                summary += f'; published on {config["initialpose_topic"]}'
+        self.c.logger.info(summary)
+        return out
+
+    def scan_age(self, msg) -> float:
+        age = self.c.clock_now() - stamp_seconds(msg.header.stamp)
+        if not math.isfinite(age) or abs(age) > CLOCKS_APART_S:
+            self.c.logger.warn(f'the scan is stamped {age:.3g} s from this node\'s clock: is use_sim_time the same '
+                               f'for the laser and this server? (poses are stamped with the scan\'s time)',
+                               throttle_duration_sec=10.0)
+        return age
+
+
+def goal_fields(goal) -> dict:
+    """make_request's keywords from a Localize goal."""
+    c = goal.search_center
+    return dict(method=goal.method, angle_step_deg=goal.angle_step_deg, timeout_s=goal.timeout_s,
+                center=Rigid2D(c.x, c.y, c.theta), radius_m=goal.search_radius_m,
+                yaw_tolerance_deg=goal.search_yaw_tolerance_deg, resolve_by_motion_s=goal.resolve_by_motion_s,
+                rotate_in_place=goal.rotate_in_place, publish=goal.publish_initialpose,
+                publish_if_ambiguous=goal.publish_if_ambiguous)
+
+
+def trigger_message(result: Localize.Result, pose: Optional[Rigid2D]) -> str:
+    """~/trigger's one line: the result's message (it says the outcome), the pose when there is one."""
+    text = result.message
+    if pose is not None:
+        text += f'; {format_pose(pose)}, confidence {result.confidence:.2f}'
+    return text
