@@ -34,3 +34,12 @@ class Outcome(enum.IntEnum):
 
 class Cancelled(Exception):
     """Raised from a progress callback (or a wait) to abandon a localization."""
+
+
+class Stage(enum.StrEnum):
+    """A goal's stage in its feedback: the `STAGE_*` constants of the Localize action's
+    feedback have the same values (a test checks that the two agree)."""
+    WAITING_FOR_SCAN = 'waiting_for_scan'
+    PREPARING_SCAN = 'preparing_scan'
+    MATCHING = 'matching'
+    RESOLVING_BY_MOTION = 'resolving_by_motion'

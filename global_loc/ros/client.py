@@ -1,31 +1,37 @@
 """`ros2 run global_loc test_global_loc`: send one Localize goal and print what happens
 (or, with --json, one JSON object: outcome, pose, covariance, score, confidence,
-hypotheses).
+hypotheses). A command line over global_loc.ros.api.GlobalLocalizer.
 
-Exit code 0 when the server localized the robot, 1 when the goal ended without a pose
-it is sure of (the message says why), 2 when no server answered.
+Ctrl-C (SIGINT) or SIGTERM cancels the goal, waits up to 2 s for the server to accept
+the cancel, then exits: an interrupted client leaves no goal turning the robot.
+
+Exit codes:
+  0  the server localized the robot;
+  1  the goal ended without a pose it is sure of (the message says why), was rejected,
+     or the client was interrupted (the goal canceled);
+  2  bad arguments;
+  3  no server answered: none within --server-timeout, it disappeared before the result,
+     or it left the goal request unanswered (with --json: {"outcome": "no_server" |
+     "server_gone" | "goal_unanswered", "success": false, "message": ...}).
 """
 from __future__ import annotations
 
 import argparse
 import json
 import math
+import signal
 import sys
-import time
+import threading
 
 import rclpy
-from action_msgs.msg import GoalStatus
-from geometry_msgs.msg import Pose2D
-from rclpy.action import ActionClient
 from rclpy.executors import ExternalShutdownException
+from rclpy.signals import SignalHandlerOptions
 
-from global_loc_interfaces.action import Localize
+from ..core.outcome import Stage
+from ..core.transform import Rigid2D, format_pose
+from .api import GlobalLocalizer, GlobalLocError, GoalRejected, LocalizeResult
 
-from ..core.transform import format_pose
-from .convert import pose_from_msg, result_to_dict
-
-STATUS = {GoalStatus.STATUS_SUCCEEDED: 'succeeded', GoalStatus.STATUS_ABORTED: 'aborted',
-          GoalStatus.STATUS_CANCELED: 'canceled'}
+EXIT_LOCALIZED, EXIT_NOT_LOCALIZED, EXIT_BAD_ARGUMENTS, EXIT_NO_SERVER = 0, 1, 2, 3
 
 
 def parse_args(argv):
@@ -53,100 +59,77 @@ def parse_args(argv):
     return parser.parse_args(argv)
 
 
-SERVER_GONE_S = 3.0    # the action server absent from the ROS graph this long: it is gone
-
-
-def wait_while_served(node, client: ActionClient, future, limit_s: float = math.inf) -> bool:
-    """Spin until `future` is done or `limit_s` passed; False when the server left the
-    ROS graph meanwhile (it died: no result will come)."""
-    deadline = time.monotonic() + limit_s
-    absent_since = None
-    while not future.done() and time.monotonic() < deadline:
-        rclpy.spin_once(node, timeout_sec=0.05)
-        if client.server_is_ready():
-            absent_since = None
-        elif absent_since is None:
-            absent_since = time.monotonic()
-        elif time.monotonic() - absent_since > SERVER_GONE_S:
-            return False
-    return True
-
-
-def server_gone() -> int:
-    print('error: the global_loc server disappeared before answering (crashed or stopped); no result', file=sys.stderr)
-    return 2
-
-
-def run(node, args) -> int:
-    client = ActionClient(node, Localize, args.action)
-    if not client.wait_for_server(timeout_sec=args.server_timeout):
-        print(f'error: no global_loc server answered on action "{args.action}" within {args.server_timeout:.0f} s '
-              f'(is `ros2 run global_loc server` running, with the same ROS_DOMAIN_ID?)', file=sys.stderr)
-        return 2
-    goal = Localize.Goal(method=args.method, angle_step_deg=args.angle_step, timeout_s=args.timeout,
-                         publish_initialpose=not args.no_publish, publish_if_ambiguous=args.publish_if_ambiguous,
-                         search_center=Pose2D(x=args.near[0], y=args.near[1], theta=math.radians(args.near[2])),
-                         search_radius_m=args.radius, search_yaw_tolerance_deg=args.yaw_tolerance,
-                         resolve_by_motion_s=args.resolve_by_motion, rotate_in_place=args.rotate_in_place)
+def feedback_printer(quiet: bool):
+    """Prints a line per new stage (and the end of matching), unless `quiet`."""
     last_stage = ['']
 
-    def on_feedback(fb):
-        f = fb.feedback
-        if args.json:
+    def on_feedback(f):
+        if quiet:
             return
-        if f.stage != last_stage[0] or (f.progress >= 0.95 and f.stage != 'resolving_by_motion'):
-            extra = f', {f.hypotheses} hypotheses' if f.stage == 'resolving_by_motion' else ''
+        if f.stage != last_stage[0] or (f.progress >= 0.95 and f.stage != Stage.RESOLVING_BY_MOTION):
+            extra = f', {f.hypotheses} hypotheses' if f.stage == Stage.RESOLVING_BY_MOTION else ''
             print(f'[{f.progress * 100:5.1f}%] {f.stage}  best score {f.best_score:.3f}{extra}', flush=True)
             last_stage[0] = f.stage
+    return on_feedback
 
-    send = client.send_goal_async(goal, feedback_callback=on_feedback)
-    if not wait_while_served(node, client, send, args.server_timeout) or not send.done():
-        print(f'error: the global_loc server did not answer the goal request within {args.server_timeout:.0f} s '
-              f'(it stopped, or the request was lost while it was starting)', file=sys.stderr)
-        return 2
-    handle = send.result()
-    if handle is None or not handle.accepted:
-        print('error: the server rejected the goal', file=sys.stderr)
-        return 1
-    result_future = handle.get_result_async()
+
+def print_result(result: LocalizeResult, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(result.as_dict()), flush=True)
+        return
+    if result.pose is not None:
+        print(f'pose:       {format_pose(result.pose)}  (frame {result.frame_id})')
+        print(f'score:      {result.score:.3f}   confidence: {result.confidence:.2f}   '
+              f'time: {result.elapsed_s:.2f} s')
+        for i, (p, s) in enumerate(result.hypotheses):
+            print(f'  hypothesis {i + 1}: {format_pose(p)}  score {s:.3f}')
+    print(f'{result.status}: {result.message}')
+
+
+def run(localizer: GlobalLocalizer, args) -> int:
+    timer = None
     if args.cancel_after > 0:
-        if not wait_while_served(node, client, result_future, args.cancel_after):
-            return server_gone()
-        if not result_future.done():
-            if not args.json:
+        def cancel():
+            if localizer.cancel() and not args.json:
                 print(f'canceling after {args.cancel_after:.1f} s', flush=True)
-            if not wait_while_served(node, client, handle.cancel_goal_async()):
-                return server_gone()
-    if not wait_while_served(node, client, result_future):
-        return server_gone()
-    response = result_future.result()
-    result = response.result
-    status = STATUS.get(response.status, str(response.status))
-    if args.json:
-        print(json.dumps(result_to_dict(result, status)), flush=True)
-    else:
-        if len(result.hypotheses.poses):
-            print(f'pose:       {format_pose(pose_from_msg(result.pose.pose.pose))}  '
-                  f'(frame {result.pose.header.frame_id})')
-            print(f'score:      {result.score:.3f}   confidence: {result.confidence:.2f}   '
-                  f'time: {result.elapsed_s:.2f} s')
-            for i, (p, s) in enumerate(zip(result.hypotheses.poses, result.hypothesis_scores, strict=True)):
-                print(f'  hypothesis {i + 1}: {format_pose(pose_from_msg(p))}  score {s:.3f}')
-        print(f'{status}: {result.message}')
-    return 0 if response.status == GoalStatus.STATUS_SUCCEEDED and result.success else 1
+        timer = threading.Timer(args.cancel_after, cancel)
+        timer.daemon = True
+        timer.start()
+    try:
+        near = Rigid2D(args.near[0], args.near[1], math.radians(args.near[2]))
+        result = localizer.localize(
+            method=args.method, angle_step_deg=args.angle_step, timeout_s=args.timeout, publish=not args.no_publish,
+            publish_if_ambiguous=args.publish_if_ambiguous, near=near,
+            radius_m=args.radius, yaw_tolerance_deg=args.yaw_tolerance, resolve_by_motion_s=args.resolve_by_motion,
+            rotate_in_place=args.rotate_in_place, feedback=feedback_printer(args.json))
+    except GlobalLocError as e:
+        print(f'error: {e}', file=sys.stderr)
+        if args.json:
+            print(json.dumps({'outcome': e.label, 'success': False, 'message': str(e)}), flush=True)
+        return EXIT_NOT_LOCALIZED if isinstance(e, GoalRejected) else EXIT_NO_SERVER
+    finally:
+        if timer is not None:
+            timer.cancel()
+    print_result(result, args.json)
+    return EXIT_LOCALIZED if result.status == 'succeeded' and result.success else EXIT_NOT_LOCALIZED
 
 
 def main(argv=None):
     args = parse_args(sys.argv[1:] if argv is None else argv)
-    rclpy.init()
-    node = rclpy.create_node('test_global_loc')
-    code = 1
+    # No rclpy signal handlers: SIGINT and SIGTERM are the localizer's while the goal runs
+    # (they cancel it), and outside of it they end the process as they normally would.
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    localizer = GlobalLocalizer('test_global_loc', action=args.action, server_timeout_s=args.server_timeout,
+                                cancel_signals=(signal.SIGINT, signal.SIGTERM))
+    code = EXIT_NOT_LOCALIZED
     try:
-        code = run(node, args)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        print('interrupted', file=sys.stderr)
+        code = run(localizer, args)
+    except KeyboardInterrupt as e:
+        print(f'interrupted: {e}' if str(e) else 'interrupted', file=sys.stderr)
+    except ExternalShutdownException:
+        print('interrupted: ROS was shut down', file=sys.stderr)
     finally:
-        node.destroy_node()
+        localizer.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
     sys.exit(code)

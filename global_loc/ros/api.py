@@ -1,0 +1,343 @@
+"""A Python API for the global_loc server, modelled on nav2_simple_commander's
+BasicNavigator: a mission script (or a test) asks where the robot is with one call and
+gets a typed answer, instead of starting `test_global_loc` and parsing its JSON.
+
+    rclpy.init()
+    localizer = GlobalLocalizer()
+    if not localizer.wait_until_active(30.0):
+        raise SystemExit('no active global_loc server')
+    result = localizer.localize(resolve_by_motion_s=20.0, rotate_in_place=True)
+    if result.success:
+        print(result.pose, result.confidence)
+
+Every call spins the localizer's own node (its own executor) until its answer, and ends:
+an answer the server gave is a LocalizeResult (its `outcome` says how the goal ended);
+no server, a server that disappears mid-goal, a goal request left unanswered or rejected
+is a GlobalLocError subclass - never a hang. While `localize` runs, SIGINT (and whatever
+`cancel_signals` lists) cancels the goal, waits up to CANCEL_WAIT_S for the server to
+accept the cancel, then raises KeyboardInterrupt: an interrupted script leaves no goal
+turning the robot.
+"""
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+import signal
+import threading
+import time
+from typing import Callable, Optional
+
+import numpy as np
+from action_msgs.msg import GoalStatus
+from action_msgs.srv import CancelGoal
+from geometry_msgs.msg import Pose2D
+from lifecycle_msgs.srv import GetState
+from rclpy import signals as rclpy_signals
+from rclpy.action import ActionClient
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from global_loc_interfaces.action import Localize
+
+from ..core.outcome import Outcome
+from ..core.transform import Rigid2D
+from .convert import pose_from_msg, stamp_seconds
+
+SERVER_GONE_S = 3.0    # the server absent from the ROS graph this long: it is gone (no answer will come)
+CANCEL_WAIT_S = 2.0    # an interrupted goal: how long to wait for the server to accept the cancel
+STATUS_NAMES = {GoalStatus.STATUS_SUCCEEDED: 'succeeded', GoalStatus.STATUS_ABORTED: 'aborted',
+                GoalStatus.STATUS_CANCELED: 'canceled'}
+
+
+class GlobalLocError(Exception):
+    """The server gave no answer; `label` is the client's JSON `outcome` for it."""
+    label = 'error'
+
+
+class NoServer(GlobalLocError):
+    """No global_loc server (action or service) answered within the timeout."""
+    label = 'no_server'
+
+
+class ServerGone(GlobalLocError):
+    """The server left the ROS graph while a request waited for its answer (it crashed or stopped)."""
+    label = 'server_gone'
+
+
+class GoalUnanswered(GlobalLocError):
+    """The server did not answer the goal request in time (lost while it was starting or stopping)."""
+    label = 'goal_unanswered'
+
+
+class GoalRejected(GlobalLocError):
+    """The server rejected the goal."""
+    label = 'goal_rejected'
+
+
+@dataclasses.dataclass(frozen=True)
+class LocalizeResult:
+    """The server's answer to one goal (global_loc_interfaces/action/Localize's result)."""
+    outcome: Outcome
+    success: bool                  # True only when the server is confident the pose is right
+    message: str
+    pose: Optional[Rigid2D]        # the robot base in `frame_id`; None when the server has no hypothesis
+    covariance: Optional[np.ndarray]    # 3x3 (x, y, yaw), with `pose`
+    score: float
+    confidence: float
+    hypotheses: list               # [(Rigid2D, score)], best first; hypotheses[0][0] is `pose`
+    scan_stamp: float              # the localized scan's stamp, s (0 when no scan was used)
+    scan_age_s: float
+    elapsed_s: float
+    status: str                    # how the action ended: succeeded | aborted | canceled
+    frame_id: str = 'map'
+
+    @staticmethod
+    def from_msg(result: Localize.Result, status: int) -> 'LocalizeResult':
+        hypotheses = [(pose_from_msg(p), float(s))
+                      for p, s in zip(result.hypotheses.poses, result.hypothesis_scores, strict=True)]
+        pose = covariance = None
+        if hypotheses:
+            pose = pose_from_msg(result.pose.pose.pose)
+            covariance = np.asarray(result.pose.pose.covariance, dtype=float).reshape(6, 6)[np.ix_([0, 1, 5],
+                                                                                                  [0, 1, 5])]
+        try:
+            outcome = Outcome(result.outcome)
+        except ValueError:      # a newer server's outcome: no pose of it can be trusted here
+            outcome = Outcome.NONE
+        return LocalizeResult(outcome, bool(result.success), result.message, pose, covariance, float(result.score),
+                              float(result.confidence), hypotheses, stamp_seconds(result.scan_stamp),
+                              float(result.scan_age_s), float(result.elapsed_s),
+                              STATUS_NAMES.get(status, str(status)), result.pose.header.frame_id or 'map')
+
+    def as_dict(self) -> dict:
+        """The client's JSON object (test_global_loc --json)."""
+        return {'outcome': self.outcome.label, 'status': self.status, 'success': self.success,
+                'message': self.message, 'score': self.score if math.isfinite(self.score) else None,
+                'confidence': self.confidence, 'elapsed_s': self.elapsed_s,
+                'hypotheses': [{**p.as_dict(), 'score': round(s, 5)} for p, s in self.hypotheses],
+                'scan_stamp': self.scan_stamp, 'scan_age_s': self.scan_age_s,
+                'pose': None if self.pose is None else self.pose.as_dict(),
+                'covariance': None if self.covariance is None else self.covariance.tolist()}
+
+
+class GlobalLocalizer(Node):
+    """A client node of one global_loc server (`server_node`, its action `action`).
+    `server_timeout_s` bounds every wait for the server to appear or to accept a request."""
+
+    def __init__(self, node_name: str = 'global_localizer', namespace: str = '', *,
+                 server_node: str = 'global_loc_server', action: str = 'localize', server_timeout_s: float = 10.0,
+                 cancel_signals: tuple = (signal.SIGINT,), context=None):
+        super().__init__(node_name, namespace=namespace, context=context)
+        self.server_node, self.action_name = server_node, action
+        self.server_timeout_s, self.cancel_signals = server_timeout_s, cancel_signals
+        self._action = ActionClient(self, Localize, action)
+        self._get_state = self.create_client(GetState, f'{server_node}/get_state')
+        self._trigger = self.create_client(Trigger, f'{server_node}/trigger')
+        self._status: Optional[str] = None
+        self.create_subscription(String, f'{server_node}/status', self._on_status, 10)
+        self._executor = SingleThreadedExecutor(context=self.context)
+        self._executor.add_node(self)
+        self._running = False                       # a localize() call is under way
+        self._cancel_wanted = threading.Event()     # cancel() or a signal asked to cancel it
+        self._signalled = False                     # ... a signal did (KeyboardInterrupt after the cancel)
+
+    def __enter__(self) -> 'GlobalLocalizer':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.destroy_node()
+
+    def destroy_node(self) -> None:
+        self._executor.remove_node(self)
+        self._executor.shutdown(timeout_sec=1.0)
+        self._action.destroy()
+        super().destroy_node()
+
+    # ---- the calls ---------------------------------------------------------------------------
+    def wait_until_active(self, timeout_s: float) -> bool:
+        """Whether, within `timeout_s`, the action server is up and the server node's
+        lifecycle state (`~/get_state`) is `active`."""
+        deadline = time.monotonic() + timeout_s
+        if not self._action.wait_for_server(timeout_sec=max(0.0, timeout_s)):
+            return False
+        while time.monotonic() < deadline:
+            if self._get_state.wait_for_service(timeout_sec=max(0.0, min(1.0, deadline - time.monotonic()))):
+                future = self._get_state.call_async(GetState.Request())
+                with contextlib.suppress(ServerGone):
+                    self._wait(future, self._get_state.service_is_ready, max(0.0, deadline - time.monotonic()))
+                if future.done() and future.result() is not None and \
+                        future.result().current_state.label == 'active':
+                    return True
+                self._spin_for(0.1)
+        return False
+
+    def localize(self, method: Optional[str] = None, near=None, radius_m: float = 0.0, yaw_tolerance_deg: float = 0.0,
+                 resolve_by_motion_s: float = 0.0, rotate_in_place: bool = False, publish: bool = True,
+                 publish_if_ambiguous: bool = False, angle_step_deg: float = 0.0, timeout_s: float = 0.0,
+                 feedback: Optional[Callable[[Localize.Feedback], None]] = None) -> LocalizeResult:
+        """One Localize goal, to its end. `near`: the search prior's centre (Rigid2D or
+        (x, y, yaw) in the map frame, radians) for `radius_m` / `yaw_tolerance_deg` (0: the
+        whole map / any heading); `timeout_s`: how long the server waits for a scan (0: its
+        default); `feedback(msg)` gets each Localize.Feedback (its `stage` is a core.outcome.Stage
+        value). Raises NoServer, GoalUnanswered, GoalRejected, ServerGone; KeyboardInterrupt
+        after canceling the goal."""
+        centre = near if isinstance(near, Rigid2D) else Rigid2D(*(near or (0.0, 0.0, 0.0)))
+        goal = Localize.Goal(method=method or '', angle_step_deg=float(angle_step_deg), timeout_s=float(timeout_s),
+                             publish_initialpose=bool(publish), publish_if_ambiguous=bool(publish_if_ambiguous),
+                             search_center=Pose2D(x=float(centre.x), y=float(centre.y), theta=float(centre.yaw)),
+                             search_radius_m=float(radius_m), search_yaw_tolerance_deg=float(yaw_tolerance_deg),
+                             resolve_by_motion_s=float(resolve_by_motion_s), rotate_in_place=bool(rotate_in_place))
+        self._cancel_wanted.clear()
+        self._signalled, self._running = False, True
+        try:
+            with self._signals_cancel_the_goal():
+                response = self._run_goal(goal, feedback)
+        finally:
+            self._running = False
+        return LocalizeResult.from_msg(response.result, response.status)
+
+    def cancel(self) -> bool:
+        """Cancel the running localize() (from another thread, or a feedback callback): it
+        asks the server and returns the result the goal ends with. Whether one was running."""
+        if self._running:
+            self._cancel_wanted.set()
+        return self._running
+
+    def trigger(self) -> tuple[bool, str]:
+        """`~/trigger` (std_srvs/Trigger): localize the next scan with the server's defaults;
+        (success, the server's one-line message)."""
+        if not self._trigger.wait_for_service(timeout_sec=self.server_timeout_s):
+            raise NoServer(f'no service {self._trigger.srv_name} within {self.server_timeout_s:g} s')
+        future = self._trigger.call_async(Trigger.Request())
+        self._wait(future, self._trigger.service_is_ready)
+        return bool(future.result().success), future.result().message
+
+    def status(self, wait_s: float = 1.0) -> Optional[str]:
+        """The newest `~/status` message (the server's health: 'localized fit=0.93', 'lost ...'),
+        waiting up to `wait_s` for a first one; None when none came."""
+        deadline = time.monotonic() + wait_s
+        self._spin_for(0.0)
+        while self._status is None and time.monotonic() < deadline:
+            self._spin_for(0.05)
+        return self._status
+
+    # ---- the goal's steps --------------------------------------------------------------------
+    def _run_goal(self, goal: Localize.Goal, feedback) -> object:
+        """Send, wait for the result; cancel on request. The action's GetResult response."""
+        if not self._action.wait_for_server(timeout_sec=self.server_timeout_s):
+            raise NoServer(f'no global_loc server answered on action "{self.action_name}" within '
+                           f'{self.server_timeout_s:g} s (is `ros2 run global_loc server` running, with the same '
+                           f'ROS_DOMAIN_ID?)')
+        if self._signalled:
+            raise KeyboardInterrupt('before the goal was sent')
+        served = self._action.server_is_ready
+        sent = self._action.send_goal_async(goal, feedback_callback=(lambda m: feedback(m.feedback)) if feedback
+                                            else None)
+        if not self._wait(sent, served, self.server_timeout_s):
+            raise GoalUnanswered(f'the global_loc server did not answer the goal request within '
+                                 f'{self.server_timeout_s:g} s (it stopped, or the request was lost while it was '
+                                 f'starting)')
+        handle = sent.result()
+        if handle is None or not handle.accepted:
+            raise GoalRejected('the server rejected the goal')
+        done = handle.get_result_async()
+        cancel_sent = False
+        try:
+            self._wait(done, served, stop=self._cancel_wanted.is_set)
+            if not done.done():
+                cancel_sent = True
+                accepted = self._request_cancel(handle, served)
+                if self._signalled:
+                    raise KeyboardInterrupt('the goal was canceled' if accepted else
+                                            'the goal was not canceled: the server did not confirm the cancel')
+                self._wait(done, served)        # the goal ends canceled at the search's next step
+        except KeyboardInterrupt:
+            if not cancel_sent:
+                self._request_cancel(handle, served)
+            raise
+        return done.result()
+
+    def _request_cancel(self, handle, served) -> bool:
+        """Ask the server to cancel the goal; whether it accepted within CANCEL_WAIT_S."""
+        future = handle.cancel_goal_async()
+        try:
+            self._wait(future, served, CANCEL_WAIT_S)
+        except ServerGone:
+            return False
+        accepted = future.done() and future.result() is not None and \
+            future.result().return_code == CancelGoal.Response.ERROR_NONE
+        if not accepted:
+            self.get_logger().warn(f'the server did not accept the cancel within {CANCEL_WAIT_S:g} s')
+        return accepted
+
+    def _wait(self, future, served: Callable[[], bool], limit_s: float = math.inf,
+              stop: Callable[[], bool] = lambda: False) -> bool:
+        """Spin until `future` is done (True), `limit_s` passed or `stop()` (False). Raises
+        ServerGone when `served()` (the server on the graph) was false for SERVER_GONE_S."""
+        deadline = time.monotonic() + limit_s
+        absent_since = None
+        while not future.done() and time.monotonic() < deadline and not stop():
+            self._executor.spin_once(timeout_sec=0.05)
+            if served():
+                absent_since = None
+            elif absent_since is None:
+                absent_since = time.monotonic()
+            elif time.monotonic() - absent_since > SERVER_GONE_S:
+                raise ServerGone('the global_loc server disappeared before answering (crashed or stopped); '
+                                 'no result')
+        return future.done()
+
+    def _spin_for(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        self._executor.spin_once(timeout_sec=0.0)
+        while time.monotonic() < deadline:
+            self._executor.spin_once(timeout_sec=max(0.0, min(0.05, deadline - time.monotonic())))
+
+    def _on_status(self, msg: String) -> None:
+        self._status = msg.data
+
+    # ---- signals -----------------------------------------------------------------------------
+    def _on_signal(self, signum, frame) -> None:
+        """A cancel signal: the wait loop cancels the goal; a second one gives up waiting."""
+        if self._signalled:
+            raise KeyboardInterrupt(f'signal {signum}')
+        self._signalled = True
+        self._cancel_wanted.set()
+
+    @contextlib.contextmanager
+    def _signals_cancel_the_goal(self):
+        """While a goal runs, `cancel_signals` cancel it instead of ending the process at
+        once. rclpy's own handlers shut every context down at the signal - the cancel could
+        not be sent - so they are set aside for these signals and reinstalled after. Only
+        the main thread owns signals: elsewhere nothing changes."""
+        if threading.current_thread() is not threading.main_thread() or not self.cancel_signals:
+            yield
+            return
+        rclpy_options = rclpy_signals.get_current_signal_handlers_options()
+        rclpy_had = _SIGNALS_OF[rclpy_options]
+        if rclpy_had:
+            rclpy_signals.uninstall_signal_handlers()
+        # a signal the process ignores (a background job's SIGINT) stays ignored
+        taken = [s for s in self.cancel_signals if signal.getsignal(s) != signal.SIG_IGN]
+        previous = {s: signal.signal(s, self._on_signal) for s in taken}
+        rclpy_keeps = rclpy_had - set(taken)
+        if rclpy_keeps:
+            rclpy_signals.install_signal_handlers(_OPTIONS_OF[frozenset(rclpy_keeps)])
+        try:
+            yield
+        finally:
+            if rclpy_keeps:
+                rclpy_signals.uninstall_signal_handlers()
+            for s, handler in previous.items():
+                signal.signal(s, handler)
+            if rclpy_had:
+                rclpy_signals.install_signal_handlers(rclpy_options)
+
+
+_Options = rclpy_signals.SignalHandlerOptions
+_SIGNALS_OF = {_Options.NO: frozenset(), _Options.SIGINT: frozenset({signal.SIGINT}),
+               _Options.SIGTERM: frozenset({signal.SIGTERM}), _Options.ALL: frozenset({signal.SIGINT, signal.SIGTERM})}
+_OPTIONS_OF = {signals: options for options, signals in _SIGNALS_OF.items()}
