@@ -212,3 +212,14 @@ def test_the_voxel_filter_keeps_what_bnb_would_keep():
     matcher = BranchAndBoundMatcher(m)
     assert np.array_equal(matcher.prepare(filtered), matcher.prepare(points))
     assert voxel_filter(points, 0.0) is points
+
+
+def test_a_tilted_laser_is_cut_to_the_height_band_and_a_level_one_is_not():
+    ranges = np.array([1.0, 2.0, 3.0])
+    points = np.column_stack([ranges, np.zeros(3)])
+    tilted = Mount3D(0.0, 0.0, 0.5, 0.0, math.radians(14.0), 0.0)     # its 2 m beam reaches the floor
+    view = merge_view({'scan': SensorReading('scan', 0.0, points, tilted)}, config=ViewConfig(voxel_size=0.0))
+    assert len(view.points.points) == 1 and view.points.dropped == {'below_cloud_z_min': 2}
+    assert not view.points.beams
+    low = Mount3D(0.0, 0.0, 0.05)           # a level laser below cloud_z_min keeps every point
+    assert len(merge_view({'scan': SensorReading('scan', 0.0, points, low)}).points.points) == 3

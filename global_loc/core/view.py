@@ -193,8 +193,9 @@ def _leave_out_clock_outliers(readings: list, config: ViewConfig, left_out: dict
 
 
 def _points_in_band(r: SensorReading, config: ViewConfig) -> tuple[np.ndarray, np.ndarray, dict]:
-    """The reading's points in the base frame (N, 3): finite, within reach, and for a 3D
-    reading within the height band; with how many were dropped per reason."""
+    """The reading's points in the base frame (N, 3) and the sensor frame: finite, within
+    reach, and for a 3D reading or a tilted laser within the height band; with how many
+    were dropped per reason."""
     pts = np.asarray(r.points, dtype=float)
     finite = np.isfinite(pts).all(axis=1)
     reach = np.full(len(pts), True)
@@ -202,7 +203,7 @@ def _points_in_band(r: SensorReading, config: ViewConfig) -> tuple[np.ndarray, n
     kept = pts[finite & reach]
     xyz = r.mount.apply(kept)
     drops = {'nan_or_inf': int((~finite).sum()), 'beyond_reach': int((finite & ~reach).sum())}
-    if r.is_3d:
+    if r.is_3d or not r.mount.is_level():      # a tilted 2D laser's far beams reach the floor too
         low, high = xyz[:, 2] < config.cloud_z_min, xyz[:, 2] > config.cloud_z_max
         drops.update(below_cloud_z_min=int(low.sum()), above_cloud_z_max=int(high.sum()))
         xyz, kept = xyz[~(low | high)], kept[~(low | high)]
