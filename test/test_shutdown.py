@@ -1,7 +1,7 @@
 """Stopping in every state, in real processes (issue 18, D1-D3, D9): a SIGTERM or SIGINT
 ends the running goal with a result the client receives ("the server is stopping"),
 the server exits promptly and cleanly, and a client whose server disappears gives up
-with exit code 2."""
+with exit code 3."""
 import json
 import os
 import signal
@@ -80,7 +80,7 @@ def test_sigterm_while_matching_ends_the_goal_and_the_server(tmp_path):
     assert result is not None and result['outcome'] == 'canceled' and 'stopping' in result['message'], (result, err)
 
 
-def test_client_gives_up_with_exit_code_2_when_the_server_dies_mid_goal(tmp_path):
+def test_client_gives_up_with_exit_code_3_when_the_server_dies_mid_goal(tmp_path):
     env = isolated_env()
     server = start_server(env, tmp_path / 'server.log')
     client = start_client(env, '--timeout', '1e9', stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -92,7 +92,7 @@ def test_client_gives_up_with_exit_code_2_when_the_server_dies_mid_goal(tmp_path
     finally:
         client.kill()
         server.stop()
-    assert client.returncode == 2, (out, err)
+    assert client.returncode == 3, (out, err)
     assert 'server' in err and ('gone' in err or 'disappeared' in err), err
 
 
