@@ -58,8 +58,10 @@ ROS_INSTALLED = importlib.util.find_spec('rclpy') is not None
 
 
 def is_ros_module(name: str) -> bool:
+    """A module of ROS 2 itself or of an interface package (std_msgs, std_srvs, builtin_interfaces, ...)."""
     top = (name or '').split('.')[0]
-    return top in ('rclpy', 'global_loc_interfaces', 'launch', 'launch_ros', 'tf2_ros') or top.endswith('_msgs')
+    return top in ('rclpy', 'tf2_ros', 'launch', 'launch_ros', 'ament_index_python') or \
+        top.endswith(('_msgs', '_srvs', '_interfaces'))
 
 
 def pytest_configure(config):
