@@ -1,7 +1,8 @@
 """package.xml is what `rosdep install --from-paths src` reads on a real ROS 2 install: every
 third-party module imported by global_loc/, launch/, setup.py and test/ must have its rosdep
 key declared there, in a scope that has it when it is needed, and nothing may be declared
-that nothing imports. The imports are read with ast (an import inside a function counts)."""
+that nothing uses. The imports are read with ast (an import inside a function counts), and
+so are the packages whose executables a launch file starts (Node(package='...'))."""
 import ast
 import sys
 import xml.etree.ElementTree as ElementTree
@@ -27,6 +28,7 @@ ROSDEP_KEYS = {
     'launch_ros': 'launch_ros',
     'lifecycle_msgs': 'lifecycle_msgs',
     'matplotlib': 'python3-matplotlib',
+    'nav2_lifecycle_manager': 'nav2_lifecycle_manager',   # launched, not imported
     'nav_msgs': 'nav_msgs',
     'numba': 'python3-numba',
     'numpy': 'python3-numpy',
@@ -66,18 +68,25 @@ def own_modules() -> set[str]:
     return {'global_loc'} | {p.stem for p in (ROOT / 'test').glob('*.py')}
 
 
+def used_names(node) -> list[str]:
+    """The modules an import statement imports, or the package a launch Node(package=...) runs."""
+    if isinstance(node, ast.Import):
+        return [alias.name for alias in node.names]
+    if isinstance(node, ast.ImportFrom) and node.level == 0:
+        return [node.module]
+    if isinstance(node, ast.Call) and getattr(node.func, 'id', getattr(node.func, 'attr', None)) == 'Node':
+        return [k.value.value for k in node.keywords if k.arg == 'package' and isinstance(k.value, ast.Constant)]
+    return []
+
+
 def third_party_imports(paths) -> dict[str, set[str]]:
-    """Top-level module -> files (relative) importing it, stdlib and own modules left out."""
+    """Top-level module (or launched package) -> files (relative) using it, stdlib and own
+    modules left out."""
     skip = set(sys.stdlib_module_names) | own_modules()
     found: dict[str, set[str]] = {}
     for path in paths:
         for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            if isinstance(node, ast.Import):
-                names = [alias.name for alias in node.names]
-            elif isinstance(node, ast.ImportFrom) and node.level == 0:
-                names = [node.module]
-            else:
-                continue
+            names = used_names(node)
             for top in {name.split('.')[0] for name in names} - skip:
                 found.setdefault(top, set()).add(str(path.relative_to(ROOT) if path.is_relative_to(ROOT) else path))
     return found
