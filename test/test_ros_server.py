@@ -91,7 +91,8 @@ def test_unknown_method_is_a_bad_goal_and_the_server_keeps_serving(system):
     assert code == 1 and result['outcome'] == 'bad_goal' and result['status'] == 'aborted'
     assert "unknown method 'magic'" in result['message']
     code, result = localize(env, '--method', 'template_ccoeff', '--angle-step', '-5')
-    assert code == 1 and result['outcome'] == 'bad_goal' and 'angle step must be in [0.1, 180] degrees' in result['message']
+    assert code == 1 and result['outcome'] == 'bad_goal'
+    assert 'angle step must be in [0.1, 180] degrees' in result['message']
     assert localize(env)[0] == 0
 
 

@@ -94,9 +94,10 @@ def test_two_maps_in_quick_succession_the_newest_received_is_used(tmp_path):
     server = start_server(env, tmp_path / 'server.log', 'use_map_topic:=true')
     publisher = start_scan_publisher(env, tmp_path / 'pub.log', OFFICE_YAML, TRUTH)
     try:
+        small = grid_msg(load_map_yaml(OFFICE_YAML))
         op.map_pub.publish(grid_msg(shifted_big_office(5.0)))
-        time.sleep(0.3)                    # the big one is being prepared ...
-        op.map_pub.publish(grid_msg(load_map_yaml(OFFICE_YAML)))   # ... when the newer, small one arrives
+        server.wait_for_output('map 2 received')     # the big one is being prepared ...
+        op.map_pub.publish(small)                     # ... when the newer, small one arrives
         code, result = localize(env, '--timeout', '20')
         assert code == 0, (result, server.output()[-3000:])
         assert_pose_near(pose_of(result), TRUTH)
