@@ -17,6 +17,7 @@ from typing import Callable, Optional
 
 from global_loc_interfaces.action import Localize
 
+from ..core.limits import BudgetError
 from ..core.map_slot import MapSlot
 from ..core.mount import LaserMount
 from ..core.outcome import Cancelled, Outcome
@@ -102,8 +103,10 @@ class RequestPath:
             result = localizer.localize(mount.upright(scan_from_msg(msg)), method=request.method,
                                         angle_step_deg=request.angle_step_deg, progress=self.progress(
                                             cancelled, feedback), base_T_laser=base_T_laser, region=request.region)
-        except ScanError as e:
+        except ScanError as e:      # MountError is one: a tilted laser
             return self.refuse(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
+        except BudgetError as e:    # the goal asks for more work than a goal may do
+            return self.refuse(Outcome.BAD_GOAL, f'bad request: {e}')
         if result.outcome == Outcome.AMBIGUOUS and request.resolve_by_motion_s > 0:
             result, msg = self.c.resolve_by_motion(result, msg, base_T_laser, request, localizer, cancelled,
                                                    feedback)
