@@ -23,7 +23,25 @@ def pose_of(result: dict) -> Rigid2D:
     return Rigid2D(result['pose']['x'], result['pose']['y'], result['pose']['yaw'])
 
 
-def start_scan_publisher(env, log_path, map_yaml, pose: Rigid2D, rate=5.0) -> Process:
-    """test/scan_publisher.py: scans ray-cast at `pose` (numpy, not the simulator)."""
+def start_scan_publisher(env, log_path, map_yaml, pose: Rigid2D, rate=5.0, mode='upright') -> Process:
+    """test/scan_publisher.py: scans ray-cast at `pose` (numpy, not the simulator); `mode`
+    upside_down or mirrored: see its docstring."""
     return Process([sys.executable, os.path.join(TEST_DIR, 'scan_publisher.py'), str(map_yaml),
-                    *map(str, pose.as_tuple()), str(rate)], env, log_path)
+                    *map(str, pose.as_tuple()), str(rate), mode], env, log_path)
+
+
+class ApiLocalizer:
+    """global_loc.ros.api.GlobalLocalizer in the test process, on the env's domain (an
+    rclpy context of its own); `.api` is the localizer."""
+
+    def __init__(self, env, **kwargs):
+        import rclpy
+
+        from global_loc.ros.api import GlobalLocalizer
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=int(env['ROS_DOMAIN_ID']))
+        self.api = GlobalLocalizer('test_localizer', context=self.context, **kwargs)
+
+    def close(self) -> None:
+        self.api.destroy_node()
+        self.context.try_shutdown()

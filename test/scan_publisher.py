@@ -1,6 +1,9 @@
 """A test helper process: publishes LaserScans ray-cast at a known pose on a map.
 
-usage: python scan_publisher.py MAP_YAML X Y YAW [RATE_HZ]
+usage: python scan_publisher.py MAP_YAML X Y YAW [RATE_HZ [MODE]]
+MODE: upright (default); upside_down (what a laser mounted upside down sends: the beams
+in the opposite order); mirrored (angle_increment's sign flipped by a broken filter, so it
+contradicts angle_min/angle_max).
 """
 import sys
 
@@ -18,6 +21,7 @@ from global_loc.sim.raycast import simulate_scan
 def main():
     map_yaml, x, y, yaw = sys.argv[1], *map(float, sys.argv[2:5])
     rate = float(sys.argv[5]) if len(sys.argv) > 5 else 5.0
+    mode = sys.argv[6] if len(sys.argv) > 6 else 'upright'
     occupancy_map = load_map_yaml(map_yaml)
     rng = np.random.default_rng(0)
     rclpy.init()
@@ -26,7 +30,12 @@ def main():
 
     def tick():
         scan = simulate_scan(occupancy_map, Rigid2D(x, y, yaw), 270.0, 541, 20.0, noise_std=0.01, dropout=0.02, rng=rng)
-        pub.publish(scan_to_msg(scan, 'laser', node.get_clock().now().to_msg()))
+        if mode == 'upside_down':
+            scan.ranges = scan.ranges[::-1]
+        msg = scan_to_msg(scan, 'laser', node.get_clock().now().to_msg())
+        if mode == 'mirrored':
+            msg.angle_increment = -msg.angle_increment
+        pub.publish(msg)
 
     node.create_timer(1.0 / rate, tick)
     try:
