@@ -223,3 +223,14 @@ def test_follow_on_a_carmen_log_settles_with_its_raw_odometry():
     for r in settled:
         assert r['outcome'] == 'localized' and r['at_index'] > r['index'] and r['distance_m'] > 0.5, r
         assert r['error_xy'] < 0.2 and r['error_yaw_deg'] < 5, r     # against the corrected pose of that scan
+
+
+@pytest.mark.skipif(not os.path.exists(ACES), reason=f'shared CARMEN logs not found ({ACES})')
+def test_follow_suite_rows_and_table_on_a_real_log():
+    from global_loc.bench.follow import follow_section, log_rows
+    rows = log_rows('aces', ACES, 6, 2015, 20.0)
+    assert len(rows) == 6 and all(r['suite'] == 'follow' and r['log'] == 'aces' for r in rows)
+    assert any(r['followed'] for r in rows)
+    assert all(r['followed'] == (r['single_outcome'] == 'ambiguous') for r in rows)
+    table = '\n'.join(follow_section(rows))
+    assert '| aces | 6 |' in table

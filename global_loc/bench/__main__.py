@@ -21,6 +21,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .changed import changed_trials
+from .follow import follow_rows
 from .relocalization import relocalization_rows
 from .report import BASELINE, write_report
 from .scaling import SIZES, scaling_rows
@@ -69,8 +70,9 @@ def main(argv=None) -> int:
     parser.add_argument('--quick', action='store_true', help='few poses and maps: a few minutes')
     parser.add_argument('--suites', default='cut,sim,carmen,prior,relocalization,scaling',
                         help='comma-separated: cut, sim, carmen, prior, relocalization, scaling; and changed (a '
-                             'world changed since its map, three levels) and soak (the real server and simulator '
-                             'under faults), not in the default set')
+                             'world changed since its map, three levels), soak (the real server and simulator '
+                             'under faults) and follow (resolution by motion on the real logs), not in the default '
+                             'set')
     parser.add_argument('--soak-goals', type=int, default=0, help='goals of the soak suite (default 1000, quick 40)')
     parser.add_argument('--methods', default=','.join(METHODS))
     parser.add_argument('--jobs', type=int, default=os.cpu_count() or 1, help='worker processes')
@@ -140,13 +142,17 @@ def main(argv=None) -> int:
                                         [m for m in methods if m in ('bnb', BASELINE)],
                                         [int(s) for s in args.scaling_sizes.split(',')] if args.scaling_sizes
                                         else SIZES[:3] if args.quick else SIZES)
+    if 'follow' in suites:
+        print('follow suite (resolution by motion on the CARMEN logs) ...', file=sys.stderr)
+        notes['follow'] = follow_rows(args.shared, args.scans_per_log or (12 if args.quick else 100), args.seed)
     if 'soak' in suites:
         print('soak suite (server + simulator processes, faults) ...', file=sys.stderr)
         soak = soak_rows(args.soak_goals or (40 if args.quick else 1000), args.seed, os.path.join(out, 'soak_logs'))
         notes['soak'] = soak_summary(soak)
         notes['soak_rows'] = soak
     with open(os.path.join(out, 'rows.jsonl'), 'w') as f:
-        for row in rows + notes.get('relocalization', []) + notes.get('scaling', []) + notes.pop('soak_rows', []):
+        for row in rows + notes.get('relocalization', []) + notes.get('scaling', []) + notes.get('follow', []) + \
+                notes.pop('soak_rows', []):
             f.write(json.dumps(row) + '\n')
     meta = {'machine': machine, 'command': 'python -m global_loc.bench ' + ' '.join(argv or sys.argv[1:]),
             'jobs': args.jobs, 'threads': threads, 'wall_time_s': round(time.time() - t0, 1), 'quick': args.quick,

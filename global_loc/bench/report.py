@@ -14,6 +14,7 @@ from ..core.scan import scan_to_points  # noqa: E402
 from ..core.transform import Rigid2D  # noqa: E402
 from ..plot import plot_localization  # noqa: E402
 from .changed import changed_section  # noqa: E402
+from .follow import follow_section  # noqa: E402
 from .sections import prior_section, scaling_section, soak_section  # noqa: E402
 from .tables import BASELINE, group, pct, secs, stats  # noqa: E402
 
@@ -131,6 +132,8 @@ def write_report(rows, meta, out, maps, trials) -> None:
         md += changed_section(by_suite['changed'], out)
     if meta.get('relocalization'):
         md += relocalization_section(meta['relocalization'])
+    if meta.get('follow'):
+        md += follow_section(meta['follow'])
     if meta.get('soak'):
         md += soak_section(meta['soak'])
     if meta.get('scaling'):
