@@ -1,21 +1,38 @@
 """Keeping a robot localized without a person, end to end in real processes: the pybullet
 simulator (scans, wheel odometry), the server, and a node in this process playing the
-localizer's part (AMCL): it publishes /amcl_pose, and takes up a pose sent on /initialpose."""
+localizer's part (AMCL): it publishes /amcl_pose, and takes up a pose sent on /initialpose.
+The resolution by motion (ros/motion.py) is also tested without a node, with the collaborators
+it is given: a scan waiter and an odometry history fed by the simulator, a cmd_vel callable."""
 import json
 import math
+import threading
 import time
 
 import numpy as np
 import pytest
+from builtin_interfaces.msg import Time as TimeMsg
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist, Vector3
 from std_msgs.msg import String
 
 from conftest import aisles_with_a_box, assert_pose_near, symmetric_room
+from global_loc.core.localizer import Localizer
 from global_loc.core.map_io import save_map_yaml
+from global_loc.core.outcome import Outcome
+from global_loc.core.pose_history import PoseHistory
+from global_loc.core.scan_waiter import ScanWaiter
 from global_loc.core.transform import Rigid2D
-from global_loc.ros.convert import pose_from_msg, pose_to_msg, pose_with_covariance
+from global_loc.ros.convert import (
+    pose_from_msg,
+    pose_to_msg,
+    pose_with_covariance,
+    scan_from_msg,
+    scan_to_msg,
+    stamp_seconds,
+)
+from global_loc.ros.motion import resolve_by_motion
 from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, run_client, start_server, start_sim
-from global_loc.sim.simulator import BASE_T_LASER
+from global_loc.sim.laser import LaserConfig
+from global_loc.sim.simulator import BASE_T_LASER, Simulator
 
 pytestmark = pytest.mark.ros   # real ROS processes (the compat run has no ROS: -m 'not ros')
 
@@ -180,3 +197,80 @@ def test_a_symmetric_room_stays_ambiguous_after_turning_and_publishes_nothing(tm
     assert amcl.messages['/initialpose'] == []
     assert any(m.angular.z > 0 for m in amcl.messages['/cmd_vel'])      # it did turn ...
     assert amcl.messages['/cmd_vel'][-1].angular.z == 0.0                # ... and stopped
+
+
+class TurningRobot:
+    """The server's side of resolve_by_motion without a node: a real ScanWaiter of LaserScan
+    messages and a PoseHistory, fed at 10 Hz (simulated time = the stamps) by a pybullet
+    robot that turns at whatever rate the last published twist asks."""
+
+    def __init__(self, occupancy_map, start: Rigid2D, laser):
+        self.sim = Simulator(occupancy_map, laser, seed=1)
+        self.sim.place(start)
+        self.scans, self.odometry, self.twists, self.truths = ScanWaiter(), PoseHistory(), [], {}
+        self.t, self.stop = 100.0, threading.Event()
+        self.first = self.publish_scan()
+        self.thread = threading.Thread(target=self.run, daemon=True)
+
+    def publish_scan(self):
+        self.odometry.add(self.t, self.sim.odom)
+        sec = int(self.t)
+        msg = scan_to_msg(self.sim.scan(), 'laser', TimeMsg(sec=sec, nanosec=int(round((self.t - sec) * 1e9))))
+        self.truths[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = self.sim.true_pose()
+        self.scans.put(msg)
+        return msg
+
+    def run(self):
+        while not self.stop.is_set():
+            turn = self.twists[-1].angular.z if self.twists else 0.0
+            self.sim.drive(0.0, turn, 0.1)
+            self.t += 0.1
+            self.publish_scan()
+            time.sleep(0.02)
+
+    def close(self):
+        self.stop.set()
+        if self.thread.is_alive():
+            self.thread.join(5)
+        self.sim.close()
+
+
+def test_resolve_by_motion_turns_one_place_out_of_twin_aisle_ends_without_a_node():
+    m = aisles_with_a_box()
+    robot = TurningRobot(m, Rigid2D(4.0, 4.3, math.pi / 2), LaserConfig(fov_deg=180, num_beams=361, range_max=2.5))
+    localizer = Localizer(m)
+    single = localizer.localize(scan_from_msg(robot.first), base_T_laser=BASE_T_LASER)
+    assert single.outcome == Outcome.AMBIGUOUS, single.message
+    stages, logged = [], []
+    try:
+        robot.thread.start()
+        result, last = resolve_by_motion(
+            single, robot.first, BASE_T_LASER, 60.0, True, localizer=localizer, scans=robot.scans,
+            odometry=robot.odometry, odometry_arrived=lambda timeout_s: True, publish_cmd_vel=robot.twists.append,
+            rotate_speed=0.4, odom_topic='/odom', cancelled=lambda: False,
+            feedback=lambda *args: stages.append(args), log=logged.append)
+    finally:
+        robot.close()
+    assert result.outcome == Outcome.LOCALIZED and result.message.startswith('localized by motion'), result.message
+    assert last is not robot.first and stamp_seconds(last.header.stamp) > 100.0
+    assert_pose_near(result.pose, robot.truths[(last.header.stamp.sec, last.header.stamp.nanosec)], 0.1, 2.0)
+    assert any(t.angular.z == 0.4 for t in robot.twists) and robot.twists[-1] == Twist()     # turned, then stopped
+    assert stages and all(s[1] == 'resolving_by_motion' for s in stages)
+    assert logged[0].startswith('resolving by motion')
+
+
+def test_resolve_by_motion_without_odometry_says_so_and_does_not_move():
+    m = aisles_with_a_box()
+    robot = TurningRobot(m, Rigid2D(4.0, 4.3, math.pi / 2), LaserConfig(fov_deg=180, num_beams=361, range_max=2.5))
+    try:
+        localizer = Localizer(m)
+        single = localizer.localize(scan_from_msg(robot.first), base_T_laser=BASE_T_LASER)
+        result, last = resolve_by_motion(
+            single, robot.first, BASE_T_LASER, 5.0, True, localizer=localizer, scans=robot.scans,
+            odometry=PoseHistory(), odometry_arrived=lambda timeout_s: False, publish_cmd_vel=robot.twists.append,
+            rotate_speed=0.4, odom_topic='/wheel_odom', cancelled=lambda: False, feedback=lambda *a: None,
+            log=lambda s: None)
+    finally:
+        robot.close()
+    assert result.outcome == Outcome.AMBIGUOUS and last is robot.first
+    assert 'no odometry on /wheel_odom: cannot resolve by motion' in result.message and robot.twists == []
