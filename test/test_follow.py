@@ -4,11 +4,13 @@ gives its wheel odometry; twin aisle ends settle, a four-fold symmetric room doe
 and the fused view is searched by scan time, so the same observations give the same
 answer however fast they come. Offline, `localize --follow` does the same on a bag written
 here and on a shared CARMEN log."""
+import itertools
 import json
 import math
 import os
 import subprocess
 import sys
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -39,8 +41,19 @@ class CountingLocalizer(Localizer):
         return super().localize_points(points, *args, **kwargs)
 
 
-def turn_and_follow(world, seed=1):
-    """(the single-scan result, the follow outcome, the true pose at the end, the localizer)."""
+@dataclass
+class Turn:
+    single: object               # the single scan's (ambiguous) result
+    follower: HypothesisFollower
+    used: list                   # the observations it was given
+    start_odometry: Rigid2D
+    truth: Rigid2D               # the true base pose at the end
+    localizer: CountingLocalizer
+
+
+def follow_a_turn(world, seed=1, max_scans=None) -> Turn:
+    """One scan at the world's start, then its hypotheses followed while the robot turns in
+    place (one turn, or max_scans scans), until one settles."""
     make_map, start, laser = world
     m = make_map()
     sim, localizer = Simulator(m, laser, seed=seed), CountingLocalizer(m)
@@ -48,74 +61,58 @@ def turn_and_follow(world, seed=1):
         sim.place(start)
         single = localizer.localize(sim.scan(), base_T_laser=BASE_T_LASER)
         assert single.outcome == Outcome.AMBIGUOUS and len(single.hypotheses) >= 2, single.message
-        follower = HypothesisFollower(single, localizer, BASE_T_LASER, sim.odom, 100.0)
-        follower.follow(turning_observations(sim, follower, 100.0))
-        return single, follower.finish(), sim.true_pose(), localizer
+        turn = Turn(single, HypothesisFollower(single, localizer, BASE_T_LASER, sim.odom, 100.0), [], sim.odom,
+                    start, localizer)
+        for obs in itertools.islice(turning_observations(sim, turn.follower, 100.0), max_scans):
+            turn.used.append(obs)
+            if turn.follower.observe(obs):
+                break
+        turn.truth = sim.true_pose()
+        return turn
     finally:
         sim.close()
 
 
 def test_twin_aisle_ends_settle_on_the_true_place_while_turning():
-    single, outcome, truth, localizer = turn_and_follow(AISLE_END)
+    turn = follow_a_turn(AISLE_END)
+    outcome = turn.follower.finish()
     assert outcome.settled and outcome.result.outcome == Outcome.LOCALIZED, outcome.result.message
     assert outcome.result.message.startswith('localized by motion after')
-    assert_pose_near(outcome.result.pose, truth, 0.1, 2.0)            # the robot's pose at the last scan used
+    assert_pose_near(outcome.result.pose, turn.truth, 0.1, 2.0)        # the robot's pose at the last scan used
     assert outcome.result.hypotheses[0].pose == outcome.result.pose
     assert 0.5 * math.pi < outcome.turned_rad < 2 * math.pi and outcome.travelled_m < 0.3
-    assert outcome.last is not None and outcome.elapsed_s == pytest.approx(outcome.last.stamp - 100.0)
-    assert outcome.scans == round(outcome.elapsed_s / 0.1)
+    assert outcome.last is turn.used[-1] and outcome.elapsed_s == pytest.approx(outcome.last.stamp - 100.0)
+    assert outcome.scans == len(turn.used) == round(outcome.elapsed_s / 0.1)
     # one search of the fused view per second of scan time at most (and one when it settled)
-    assert 1 <= localizer.fused_searches <= outcome.elapsed_s / SETTLE_PERIOD_S + 1
+    assert 1 <= turn.localizer.fused_searches <= outcome.elapsed_s / SETTLE_PERIOD_S + 1
 
 
 def test_a_symmetric_room_stays_ambiguous_after_a_full_turn():
-    single, outcome, truth, _ = turn_and_follow(SYMMETRIC)
+    turn = follow_a_turn(SYMMETRIC)
+    outcome = turn.follower.finish()
     assert not outcome.settled and outcome.result.outcome == Outcome.AMBIGUOUS
     assert outcome.result.message.startswith('ambiguous after') and '4 place(s) still match' in outcome.result.message
     assert len(outcome.result.hypotheses) == 4 and outcome.turned_rad >= 2 * math.pi
     # the hypotheses were followed: one of them is where the robot is now
-    assert min(h.pose.distance_to(truth)[0] for h in outcome.result.hypotheses) < 0.1
+    assert min(h.pose.distance_to(turn.truth)[0] for h in outcome.result.hypotheses) < 0.1
 
 
 def test_the_same_observations_give_the_same_outcome():
     """Time is the scans' stamps: a replay (offline, any speed) decides as the live run did."""
-    make_map, start, laser = AISLE_END
-    m = make_map()
-    sim, localizer = Simulator(m, laser, seed=1), Localizer(m)
-    try:
-        sim.place(start)
-        single = localizer.localize(sim.scan(), base_T_laser=BASE_T_LASER)
-        recorder = HypothesisFollower(single, localizer, BASE_T_LASER, sim.odom, 0.0)
-        start_odometry, recorded = sim.odom, []
-        for obs in turning_observations(sim, recorder, 0.0):
-            recorded.append(obs)
-            if recorder.observe(obs):
-                break
-    finally:
-        sim.close()
-    replays = []
+    turn = follow_a_turn(AISLE_END)
+    live = turn.follower.finish()
     for _ in range(2):
-        follower = HypothesisFollower(single, localizer, BASE_T_LASER, start_odometry, 0.0)
-        assert follower.follow(iter(recorded))
-        replays.append(follower.finish())
-    assert replays[0].result.pose == replays[1].result.pose and replays[0].scans == replays[1].scans == len(recorded)
+        replay = HypothesisFollower(turn.single, turn.localizer, BASE_T_LASER, turn.start_odometry, 100.0)
+        assert replay.follow(iter(turn.used))
+        again = replay.finish()
+        assert again.result.pose == live.result.pose and again.scans == live.scans == len(turn.used)
 
 
 def test_a_cancelled_follow_does_not_search_the_fused_view_again():
-    make_map, start, laser = SYMMETRIC
-    m = make_map()
-    sim, localizer = Simulator(m, laser, seed=2), CountingLocalizer(m)
-    try:
-        sim.place(start)
-        single = localizer.localize(sim.scan(), base_T_laser=BASE_T_LASER)
-        follower = HypothesisFollower(single, localizer, BASE_T_LASER, sim.odom, 0.0)
-        observations = turning_observations(sim, follower, 0.0)
-        follower.follow(next(observations) for _ in range(5))
-    finally:
-        sim.close()
-    searches = localizer.fused_searches
-    outcome = follower.finish(search_fused=False)
-    assert localizer.fused_searches == searches and not outcome.settled and outcome.scans == 5
+    turn = follow_a_turn(SYMMETRIC, seed=2, max_scans=5)
+    searches = turn.localizer.fused_searches
+    outcome = turn.follower.finish(search_fused=False)
+    assert turn.localizer.fused_searches == searches and not outcome.settled and outcome.scans == 5
 
 
 # ---- offline: `python -m global_loc localize --bag B|--carmen LOG --follow` ------------------
