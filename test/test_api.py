@@ -11,16 +11,15 @@ import time
 
 import numpy as np
 import pytest
-import rclpy
 from geometry_msgs.msg import Twist
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
-from ros_helpers import TRUTH, start_scan_publisher
+from ros_helpers import TRUTH, ApiLocalizer, start_scan_publisher
 
 from conftest import OFFICE_YAML, assert_pose_near, symmetric_room
 from global_loc.core.map_io import save_map_yaml
 from global_loc.core.outcome import Outcome, Stage
-from global_loc.ros.api import GlobalLocalizer, NoServer, ServerGone
+from global_loc.ros.api import NoServer, ServerGone
 from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, ros2, run_client, start_server, start_sim
 from global_loc.sim.simulator import BASE_T_LASER
 
@@ -97,19 +96,6 @@ def test_stage_constants_of_the_action_are_the_core_stages():
     assert constants == {stage.name: stage.value for stage in Stage}
 
 
-class Localizer:
-    """A GlobalLocalizer in this process, on the env's domain (its own rclpy context)."""
-
-    def __init__(self, env, **kwargs):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=int(env['ROS_DOMAIN_ID']))
-        self.api = GlobalLocalizer('test_api', context=self.context, **kwargs)
-
-    def close(self):
-        self.api.destroy_node()
-        self.context.try_shutdown()
-
-
 def change_state(recorder: TopicRecorder, transition_id: int) -> bool:
     client = recorder.node.create_client(ChangeState, '/global_loc_server/change_state')
     assert client.wait_for_service(timeout_sec=10.0)
@@ -133,7 +119,7 @@ def office(tmp_path_factory):
         processes.append(server)
         processes.append(start_scan_publisher(env, logs / 'pub.log', OFFICE_YAML, TRUTH))
         recorder = TopicRecorder(env, {}, 'test_api_lifecycle')
-        localizer = Localizer(env)
+        localizer = ApiLocalizer(env)
         yield localizer.api, recorder, server
     finally:
         if localizer is not None:
@@ -216,7 +202,7 @@ def test_trigger_and_status(office):
 
 def test_no_server_is_a_clear_error_within_the_timeout(tmp_path):
     env = isolated_env()
-    localizer = Localizer(env, server_timeout_s=1.0)
+    localizer = ApiLocalizer(env, server_timeout_s=1.0)
     try:
         t0 = time.monotonic()
         assert not localizer.api.wait_until_active(1.0)
@@ -238,7 +224,7 @@ def test_no_server_is_a_clear_error_within_the_timeout(tmp_path):
 def test_a_server_gone_mid_goal_is_a_clear_error(tmp_path):
     env = isolated_env()
     server = start_server(env, tmp_path / 'server.log')
-    localizer = Localizer(env)
+    localizer = ApiLocalizer(env)
     try:
         assert localizer.api.wait_until_active(60.0)
         threading.Timer(1.0, lambda: os.killpg(server.proc.pid, signal.SIGKILL)).start()

@@ -12,12 +12,13 @@ from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from nav_msgs.msg import OccupancyGrid
-from ros_helpers import TRUTH, localize, pose_of, start_scan_publisher
+from ros_helpers import TRUTH, ApiLocalizer, start_scan_publisher
 from std_srvs.srv import Empty, Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from conftest import OFFICE_YAML, REPO_ROOT, assert_pose_near, symmetric_room
 from global_loc.core.map_io import save_map_yaml
+from global_loc.core.outcome import Outcome
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import pose_from_msg
 from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, start_client, start_server
@@ -50,12 +51,15 @@ def state(recorder) -> str:
 
 @pytest.fixture
 def ros(tmp_path):
-    """A private domain with a scan publisher at TRUTH and a recorder node; stops what it started."""
+    """A private domain with a scan publisher at TRUTH, a recorder node and the Python
+    API's localizer (the client: these tests are of the server); stops what it started."""
     env = isolated_env()
     recorder = TopicRecorder(env, {'/initialpose': (PoseWithCovarianceStamped, reliable())}, 'test_nav2')
     publisher = start_scan_publisher(env, tmp_path / 'pub.log', OFFICE_YAML, TRUTH)
+    localizer = ApiLocalizer(env)
     servers = []
-    yield env, recorder, servers
+    yield env, recorder, servers, localizer.api
+    localizer.close()
     for server in servers:
         assert server.stop() == 0, server.output()
     publisher.stop()
@@ -63,24 +67,24 @@ def ros(tmp_path):
 
 
 def test_lifecycle_manager_drives_a_server_started_without_autostart(ros, tmp_path):
-    env, recorder, servers = ros
+    env, recorder, servers, api = ros
     servers.append(start_server(env, tmp_path / 'server.log', 'autostart:=false', ready_line='unconfigured'))
     assert state(recorder) == 'unconfigured'
-    code, result = localize(env, '--timeout', '10')
-    assert code == 1 and result['outcome'] == 'not_active', result
+    result = api.localize(timeout_s=10)
+    assert result.outcome == Outcome.NOT_ACTIVE and result.status == 'aborted', result
     assert transition(recorder, Transition.TRANSITION_CONFIGURE) and state(recorder) == 'inactive'
-    assert localize(env, '--timeout', '10')[1]['outcome'] == 'not_active'
+    assert api.localize(timeout_s=10).outcome == Outcome.NOT_ACTIVE
     assert transition(recorder, Transition.TRANSITION_ACTIVATE) and state(recorder) == 'active'
-    code, result = localize(env, '--timeout', '10')
-    assert code == 0 and result['outcome'] == 'localized', result
+    result = api.localize(timeout_s=10)
+    assert result.success and result.outcome == Outcome.LOCALIZED, result
     assert transition(recorder, Transition.TRANSITION_DEACTIVATE) and state(recorder) == 'inactive'
-    assert localize(env, '--timeout', '10')[1]['outcome'] == 'not_active'
+    assert api.localize(timeout_s=10).outcome == Outcome.NOT_ACTIVE
     assert transition(recorder, Transition.TRANSITION_CLEANUP) and state(recorder) == 'unconfigured'
     assert 'cleaned up: map dropped' in servers[0].output()
 
 
 def test_deactivate_during_a_goal_ends_it_and_refuses_the_next(ros, tmp_path):
-    env, recorder, servers = ros
+    env, recorder, servers, api = ros
     server = start_server(env, tmp_path / 'server.log')
     servers.append(server)
     slow = start_client(env, '--json', '--method', 'template_ccoeff', '--angle-step', '0.5', '--timeout', '10',
@@ -94,17 +98,17 @@ def test_deactivate_during_a_goal_ends_it_and_refuses_the_next(ros, tmp_path):
     out, err = slow.communicate(timeout=30)
     result = json.loads(out)
     assert result['outcome'] == 'canceled' and 'stopping' in result['message'], (result, err)
-    assert localize(env)[1]['outcome'] == 'not_active'
+    assert api.localize().outcome == Outcome.NOT_ACTIVE
     assert transition(recorder, Transition.TRANSITION_ACTIVATE)
-    assert localize(env, '--timeout', '10')[0] == 0
+    assert api.localize(timeout_s=10).success
 
 
 def test_trigger_services_localize_and_publish_and_rviz_topics_reach_a_late_subscriber(ros, tmp_path):
-    env, recorder, servers = ros
+    env, recorder, servers, _ = ros
     servers.append(start_server(env, tmp_path / 'server.log'))
     assert recorder.wait_for_publisher('/initialpose')
     reply = call(recorder, Trigger, '/global_loc_server/trigger', Trigger.Request())
-    assert reply.success and reply.message.startswith('localized: localized; x='), reply.message
+    assert reply.success and reply.message.startswith('localized; x='), reply.message
     published = recorder.wait_for('/initialpose', 1)
     assert len(published) == 1
     assert_pose_near(pose_from_msg(published[0].pose.pose), TRUTH)
@@ -133,33 +137,24 @@ def test_trigger_services_localize_and_publish_and_rviz_topics_reach_a_late_subs
 
 def test_parameters_file_is_read_and_lists_every_parameter(ros, tmp_path):
     """The shipped file starts a working server; a copy with one value changed changes it."""
-    env, recorder, servers = ros
+    env, recorder, servers, api = ros
     servers.append(start_server(env, tmp_path / 'server.log', params_file=PARAMS_FILE))
-    assert localize(env, '--timeout', '10')[0] == 0
+    assert api.localize(timeout_s=10).success
     assert servers.pop().stop() == 0
     doc = yaml.safe_load(open(PARAMS_FILE))
     doc['global_loc_server']['ros__parameters']['bnb']['max_nodes'] = 50
     changed = tmp_path / 'changed.yaml'
     changed.write_text(yaml.safe_dump(doc))
     servers.append(start_server(env, tmp_path / 'server2.log', params_file=changed))
-    code, result = localize(env, '--timeout', '10')
-    assert code == 1 and result['outcome'] == 'search_incomplete', result
+    assert api.wait_until_active(30.0)      # a goal sent right after a restart can be lost in discovery
+    result = api.localize(timeout_s=10)
+    assert not result.success and result.outcome == Outcome.SEARCH_INCOMPLETE, result
 
 
 def test_parameters_file_has_every_declared_parameter_with_its_default():
-    """Against the declarations themselves (declare_server_parameters, run on a recorder)."""
-    from global_loc.ros.parameters import declare_server_parameters
+    """Against the declarations themselves (parameters.SPECS: what the server declares)."""
+    from global_loc.ros.parameters import SPECS
 
-    class Declared:
-        def __init__(self):
-            self.values = {}
-
-        def declare_parameter(self, name, value, descriptor):
-            self.values[name] = value
-            return type('Parameter', (), {'value': value})
-
-    declared = Declared()
-    declare_server_parameters(declared)
     def flat(d, prefix=''):
         out = {}
         for k, v in d.items():
@@ -167,7 +162,7 @@ def test_parameters_file_has_every_declared_parameter_with_its_default():
         return out
 
     params = yaml.safe_load(open(PARAMS_FILE))['global_loc_server']['ros__parameters']
-    assert flat(params) == pytest.approx(declared.values)
+    assert flat(params) == pytest.approx({spec.name: spec.default for spec in SPECS})
 
 
 def test_search_prior_settles_a_symmetric_room(tmp_path):
@@ -177,12 +172,14 @@ def test_search_prior_settles_a_symmetric_room(tmp_path):
     truth = Rigid2D(2.0, 1.4, 0.4)
     server = start_server(env, tmp_path / 'server.log', f'map_yaml:={tmp_path / "square.yaml"}')
     publisher = start_scan_publisher(env, tmp_path / 'pub.log', tmp_path / 'square.yaml', truth)
+    localizer = ApiLocalizer(env)
     try:
-        assert localize(env, '--timeout', '10')[1]['outcome'] == 'ambiguous'
-        code, result = localize(env, '--timeout', '10', '--near', '1.5', '1.5', '0', '--radius', '1.5')
-        assert code == 0 and result['outcome'] == 'localized', result
-        assert_pose_near(pose_of(result), truth)
-        assert 0 <= result['scan_age_s'] < 5 and result['scan_stamp'] > 0
+        assert localizer.api.localize(timeout_s=10).outcome == Outcome.AMBIGUOUS
+        result = localizer.api.localize(timeout_s=10, near=(1.5, 1.5, 0.0), radius_m=1.5)
+        assert result.success and result.outcome == Outcome.LOCALIZED, result
+        assert_pose_near(result.pose, truth)
+        assert 0 <= result.scan_age_s < 5 and result.scan_stamp > 0
     finally:
+        localizer.close()
         publisher.stop()
         assert server.stop() == 0

@@ -47,6 +47,7 @@ from ..core.transform import Rigid2D
 from .convert import pose_from_msg, stamp_seconds
 
 SERVER_GONE_S = 3.0    # the server absent from the ROS graph this long: it is gone (no answer will come)
+STATE_CALL_S = 2.0     # wait_until_active: one ~/get_state call's answer, before it asks again
 CANCEL_WAIT_S = 2.0    # an interrupted goal: how long to wait for the server to accept the cancel
 STATUS_NAMES = {GoalStatus.STATUS_SUCCEEDED: 'succeeded', GoalStatus.STATUS_ABORTED: 'aborted',
                 GoalStatus.STATUS_CANCELED: 'canceled'}
@@ -68,7 +69,8 @@ class ServerGone(GlobalLocError):
 
 
 class GoalUnanswered(GlobalLocError):
-    """The server did not answer the goal request in time (lost while it was starting or stopping)."""
+    """The server did not answer the goal request in time (lost in discovery right after the server
+    started, or it was stopping): wait_until_active, then ask again."""
     label = 'goal_unanswered'
 
 
@@ -166,8 +168,9 @@ class GlobalLocalizer(Node):
         while time.monotonic() < deadline:
             if self._get_state.wait_for_service(timeout_sec=max(0.0, min(1.0, deadline - time.monotonic()))):
                 future = self._get_state.call_async(GetState.Request())
-                with contextlib.suppress(ServerGone):
-                    self._wait(future, self._get_state.service_is_ready, max(0.0, deadline - time.monotonic()))
+                with contextlib.suppress(ServerGone):    # a call lost in discovery is retried
+                    self._wait(future, self._get_state.service_is_ready,
+                               max(0.0, min(STATE_CALL_S, deadline - time.monotonic())))
                 if future.done() and future.result() is not None and \
                         future.result().current_state.label == 'active':
                     return True
