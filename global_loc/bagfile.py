@@ -11,6 +11,7 @@ import numpy as np
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
+from .core.mount import LaserMount, MountError
 from .core.scan import Scan
 from .core.transform import Rigid2D
 
@@ -20,8 +21,6 @@ TF_TOPICS = ('/tf_static', '/tf')
 # A /tf transform whose translation and rotation stay within these over the whole
 # recording is static in practice (a URDF joint published by robot_state_publisher).
 STATIC_M, STATIC_QUATERNION = 1e-6, 1e-6
-# Beyond this tilt of its z axis from the vertical the laser does not scan the map's plane.
-MAX_TILT_DEG = 10.0
 
 
 class BagError(ValueError):
@@ -34,9 +33,13 @@ class MountingNotFound(Exception):
 
 @dataclass(frozen=True)
 class BagMounting:
-    base_T_laser: Rigid2D      # the laser on the base, seen from above
+    mount: LaserMount          # the laser on the base, seen from above, and whether it is upside down
     source: str                # the topics it was read from, e.g. '/tf_static'
-    chain: str                 # the frames it composes, e.g. 'base_link <- shell_link <- rplidar_link'
+    chain: str                 # the frames it composes, e.g. 'base_link -> shell_link -> rplidar_link'
+
+    @property
+    def base_T_laser(self) -> Rigid2D:
+        return self.mount.base_T_laser
 
 
 def open_bag(path: str) -> Reader:
@@ -108,7 +111,7 @@ def read_mounting(path: str, topic: str, base_frame: str) -> BagMounting:
     base_chain = up_from_base[:up_from_base.index(common) + 1]
     base_T_laser = np.linalg.inv(root_T(parents, base_chain)) @ root_T(parents, laser_chain)
     used = {sources[f] for f in laser_chain[:-1] + base_chain[:-1]}
-    return BagMounting(level_pose(base_T_laser, base_frame, laser_frame),
+    return BagMounting(planar_mount(base_T_laser, base_frame, laser_frame),
                        ', '.join(sorted(used)) or f'the scans\' frame_id is {base_frame}',
                        ' -> '.join(base_chain + laser_chain[-2::-1]))
 
@@ -176,13 +179,10 @@ def root_T(parents: dict, chain: list[str]) -> np.ndarray:
     return m
 
 
-def level_pose(base_T_laser: np.ndarray, base_frame: str, laser_frame: str) -> Rigid2D:
-    """The laser's 2-D pose on the base; BagError when it is upside down or tilted (its scan
-    is then not the room seen from above as the matchers expect)."""
-    z_up = float(base_T_laser[2, 2])
-    tilt = math.degrees(math.acos(min(1.0, abs(z_up))))
-    if z_up < 0 or tilt > MAX_TILT_DEG:
-        how = 'upside down' if z_up < 0 else f'tilted {tilt:.1f} deg from level (at most {MAX_TILT_DEG:g})'
-        raise BagError(f'the bag\'s tf mounts {laser_frame} {how} on {base_frame}: --bag localizes level lasers only')
-    return Rigid2D(float(base_T_laser[0, 3]), float(base_T_laser[1, 3]),
-                   math.atan2(base_T_laser[1, 0], base_T_laser[0, 0]))
+def planar_mount(base_T_laser: np.ndarray, base_frame: str, laser_frame: str) -> LaserMount:
+    """The laser's mounting as a 2-D method uses it (core/mount.py: upright or upside down);
+    BagError when the bag's tf tilts it out of the horizontal plane."""
+    try:
+        return LaserMount.from_rotation(base_T_laser[0, 3], base_T_laser[1, 3], base_T_laser[:3, :3])
+    except MountError as e:
+        raise BagError(f'the bag\'s tf mounts {laser_frame} on {base_frame} so: {e}') from None

@@ -18,6 +18,7 @@ from .core.localizer import Localizer, LocalizerConfig
 from .core.map_io import MapError, load_map_yaml
 from .core.matchers import BranchAndBoundOptions, MethodError, method_names
 from .core.matchers.bnb.options import option_fields
+from .core.mount import LaserMount
 from .core.outcome import Outcome
 from .core.paths import default_map_yaml
 from .core.scan import Scan, ScanError, scan_to_points
@@ -60,22 +61,22 @@ def parse_truth(value) -> Rigid2D | None:
     return Rigid2D(x, y, yaw)
 
 
-def bag_scans(path: str, topic: str, every: int, mounting: dict | None = None):
-    """(where, Scan, None) per LaserScan of a rosbag2 recording; `where` carries `mounting`
-    (where the laser's mounting came from) when given."""
+def bag_scans(path: str, topic: str, every: int, mounting: dict | None = None, mount: LaserMount | None = None):
+    """(where, Scan, None) per LaserScan of a rosbag2 recording, turned upright when `mount`
+    is upside down; `where` carries `mounting` (where the laser's mounting came from) when given."""
     from .bagfile import read_scans
     for index, scan in read_scans(path, topic, every):
         yield {'index': index, 'stamp': round(scan.stamp, 9), **({'mounting': mounting} if mounting else {})}, \
-            scan, None
+            mount.upright(scan) if mount else scan, None
 
 
-def laser_mounting(args) -> tuple[Rigid2D, dict]:
+def laser_mounting(args) -> tuple[LaserMount, dict]:
     """The laser's pose on the robot base, so the printed poses are the base's, as the server
     publishes them: with --bag from the recording's /tf_static (and the /tf transforms that
     never change) when they have it, else the --laser-x/--laser-y/--laser-yaw flags; and what
     a line says of where it came from."""
-    flags = Rigid2D(args.laser_x or 0.0, args.laser_y or 0.0, args.laser_yaw or 0.0)
-    said = {'from': '--laser-x/--laser-y/--laser-yaw', **flags.as_dict()}
+    flags = LaserMount(Rigid2D(args.laser_x or 0.0, args.laser_y or 0.0, args.laser_yaw or 0.0))
+    said = {'from': '--laser-x/--laser-y/--laser-yaw', **flags.base_T_laser.as_dict()}
     if not args.bag:
         return flags, said
     from .bagfile import MountingNotFound, read_mounting
@@ -86,7 +87,8 @@ def laser_mounting(args) -> tuple[Rigid2D, dict]:
     if any(v is not None for v in (args.laser_x, args.laser_y, args.laser_yaw)):
         print(f'note: the laser mounting comes from the bag ({found.source}: {found.chain}); '
               f'--laser-x/--laser-y/--laser-yaw are not used', file=sys.stderr)
-    return found.base_T_laser, {'from': found.source, 'frames': found.chain, **found.base_T_laser.as_dict()}
+    return found.mount, {'from': found.source, 'frames': found.chain, **found.base_T_laser.as_dict(),
+                         **({'upside_down': True} if found.mount.upside_down else {})}
 
 
 def localize_main(args) -> int:
@@ -96,19 +98,25 @@ def localize_main(args) -> int:
     else:
         occupancy_map = load_map_yaml(args.map or default_map_yaml())
     bnb = BranchAndBoundOptions(**{name: getattr(args, f'bnb_{name}') for name, *_ in option_fields()})
-    base_T_laser, mounting = laser_mounting(args)
+    mount, mounting = laser_mounting(args)
+    base_T_laser = mount.base_T_laser
     config = LocalizerConfig(method=args.method, angle_step_deg=args.angle_step, opening_kernel=args.opening_kernel,
                              bnb=bnb, max_search_s=args.max_search_s, base_T_laser=base_T_laser)
     localizer = Localizer(occupancy_map, config)
     method = localizer.matcher(args.method).name   # unknown method: fail before reading any scan
     if args.follow:
+        if mount.upside_down:
+            raise ValueError("--follow: the bag's tf mounts the laser upside down; only --bag without --follow "
+                             'turns its scans upright')
         from .offline_follow import follow_main
         return follow_main(args, localizer, base_T_laser)
     if args.carmen:
         from .offline_follow import carmen_scans
         scans = carmen_scans(args.carmen, args.every)
+    elif args.bag:
+        scans = bag_scans(args.bag, args.topic, args.every, mounting, mount)
     else:
-        scans = bag_scans(args.bag, args.topic, args.every, mounting) if args.bag else json_line_scans(args.scans)
+        scans = json_line_scans(args.scans)
     for n, (where, scan, truth) in enumerate(scans, 1):
         out = {**where, 'method': method}
         try:

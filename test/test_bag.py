@@ -7,6 +7,7 @@ import json
 import math
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -83,19 +84,22 @@ LASER_ON_SHELL = Rigid2D(0.1, -0.1, math.pi / 2)
 LASER_ON_BASE = SHELL_ON_BASE * LASER_ON_SHELL
 
 
-def transform(parent: str, child: str, pose: Rigid2D, z: float, sec: int):
+def transform(parent: str, child: str, pose: Rigid2D, z: float, sec: int, upside_down=False):
+    """`pose` on `parent` as a tf message; upside down: rolled by pi (Rz(yaw) Rx(pi))."""
     m = TYPES.types
+    c, s = math.cos(pose.yaw / 2), math.sin(pose.yaw / 2)
+    x, y, z_rotation, w = (c, s, 0.0, 0.0) if upside_down else (0.0, 0.0, s, c)
     return m['geometry_msgs/msg/TransformStamped'](
         header=m['std_msgs/msg/Header'](stamp=m['builtin_interfaces/msg/Time'](sec=sec, nanosec=0), frame_id=parent),
         child_frame_id=child, transform=m['geometry_msgs/msg/Transform'](
             translation=m['geometry_msgs/msg/Vector3'](x=pose.x, y=pose.y, z=z),
-            rotation=m['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=math.sin(pose.yaw / 2),
-                                                       w=math.cos(pose.yaw / 2))))
+            rotation=m['geometry_msgs/msg/Quaternion'](x=x, y=y, z=z_rotation, w=w)))
 
 
-def write_mounted_bag(path, office_map, with_tf=True):
+def write_mounted_bag(path, office_map, with_tf=True, upside_down=False):
     """Scans taken by the mounted laser with the base at POSES; /tf also carries odom ->
-    base_link, which moves (not a mounting)."""
+    base_link, which moves (not a mounting). An upside-down laser's beams run clockwise:
+    its 270-degree scan is the upright one's ranges in reverse order."""
     rng = np.random.default_rng(5)
     tf_type = 'tf2_msgs/msg/TFMessage'
     with Writer(path, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
@@ -104,7 +108,7 @@ def write_mounted_bag(path, office_map, with_tf=True):
             tf_static = writer.add_connection('/tf_static', tf_type, typestore=TYPES)
             tf = writer.add_connection('/tf', tf_type, typestore=TYPES)
             writer.write(tf_static, 99 * 10**9, TYPES.serialize_cdr(TYPES.types[tf_type](transforms=[
-                transform('shell_link', 'rplidar_link', LASER_ON_SHELL, 0.05, 99)]), tf_type))
+                transform('shell_link', 'rplidar_link', LASER_ON_SHELL, 0.05, 99, upside_down)]), tf_type))
         for i, base in enumerate(POSES):
             if with_tf:
                 moving = [transform('odom', 'base_link', base, 0.0, 100 + i),
@@ -112,6 +116,8 @@ def write_mounted_bag(path, office_map, with_tf=True):
                 message = TYPES.types[tf_type](transforms=moving)
                 writer.write(tf, (100 + i) * 10**9, TYPES.serialize_cdr(message, tf_type))
             scan = simulate_scan(office_map, base * LASER_ON_BASE, 270.0, 541, 20.0, noise_std=0.01, rng=rng)
+            if upside_down:
+                scan = replace(scan, ranges=scan.ranges[::-1])
             writer.write(scans, (100 + i) * 10**9 + 5,
                          TYPES.serialize_cdr(laser_scan(scan, 100 + i, 'rplidar_link'), 'sensor_msgs/msg/LaserScan'))
 
@@ -137,6 +143,17 @@ def test_bag_mounting_from_tf_static_and_fixed_tf_gives_base_poses(tmp_path, off
                                ).stdout.splitlines()[0])['mounting']
     assert (shell['from'], shell['frames']) == ('/tf_static', 'shell_link -> rplidar_link')
     assert (shell['x'], shell['y'], shell['yaw']) == pytest.approx(LASER_ON_SHELL.as_tuple(), abs=1e-4)
+
+
+def test_bag_with_the_laser_upside_down_turns_its_scans_upright(tmp_path, office_map):
+    write_mounted_bag(tmp_path / 'run', office_map, upside_down=True)
+    out = run_cli('--bag', str(tmp_path / 'run'))
+    assert out.returncode == 0, out.stderr
+    rows = [json.loads(line) for line in out.stdout.splitlines()]
+    assert_base_poses(rows)
+    assert all(row['mounting']['upside_down'] for row in rows)
+    assert (rows[0]['mounting']['x'], rows[0]['mounting']['y'], rows[0]['mounting']['yaw']) == \
+        pytest.approx(LASER_ON_BASE.as_tuple(), abs=1e-4)
 
 
 def test_bag_without_the_transform_uses_the_mounting_flags_and_says_so(tmp_path, office_map):
