@@ -1,5 +1,6 @@
-"""Issue 18's defects that live in the core and the CLI (no ROS): each test failed before
-its fix. The process-level ones (signals, a dying server) are in test_shutdown.py."""
+"""Bad and degenerate input to the core and the CLI (no ROS) ends with a clear error or
+an honest outcome, never a crash, a hang or a confident wrong answer. The process-level
+cases (signals, a dying server) are in test_shutdown.py."""
 import json
 import math
 import threading
@@ -22,7 +23,8 @@ METHODS = ('bnb', 'template_ccoeff', 'template_sqdiff', 'features_orb')
 
 
 def degenerate_scans():
-    """D4: all ranges 0 with range_min 0 (every point at the laser), one finite beam, two points."""
+    """Scans with fewer than three distinct points: all ranges 0 with range_min 0 (every
+    point at the laser), one finite beam, two points."""
     zeros = Scan(-2.0, 0.01, 0.0, 10.0, np.zeros(400))
     one = np.full(400, np.inf)
     one[200] = 2.0
@@ -34,7 +36,7 @@ def degenerate_scans():
 
 @pytest.mark.parametrize('name', list(degenerate_scans()))
 @pytest.mark.parametrize('method', METHODS)
-def test_d4_d10_a_scan_without_a_shape_is_a_clear_error_for_every_method(method, name):
+def test_a_scan_without_a_shape_is_a_clear_error_for_every_method(method, name):
     loc = Localizer(load_map_yaml(OFFICE_YAML))
     with pytest.raises(ScanError, match='distinct point'):
         loc.localize(degenerate_scans()[name], method)
@@ -48,7 +50,7 @@ def test_distinct_points_are_counted_up_to_three_as_a_full_unique_would():
         assert count_distinct_up_to_3(rows) == min(3, len(np.unique(rows, axis=0)))
 
 
-def test_d4_a_tie_is_never_a_success_for_any_matcher(office_map):
+def test_a_tie_is_never_a_success_for_any_matcher(office_map):
     """The thesis matchers localized a scan when its best score passed their minimum,
     even tied with the next place (confidence 0)."""
     from global_loc.core.matchers.base import Candidate
@@ -65,12 +67,12 @@ def test_d4_a_tie_is_never_a_success_for_any_matcher(office_map):
 
 @pytest.mark.parametrize('origin', [(math.nan, 0.0, 0.0), (0.0, math.inf, 0.0), (0.0, 0.0, -math.inf),
                                     ('x', 0.0, 0.0), (0.0, 0.0)])
-def test_d5_an_occupancy_grid_with_a_non_finite_or_bad_origin_is_refused(origin):
+def test_an_occupancy_grid_with_a_non_finite_or_bad_origin_is_refused(origin):
     with pytest.raises(MapError, match='origin'):
         from_occupancy_grid(4, 4, 0.05, origin, np.zeros(16))
 
 
-def test_d7_d8_cli_bad_truth_and_bad_bytes_are_errors_of_their_line_only(tmp_path):
+def test_cli_bad_truth_and_bad_bytes_are_errors_of_their_line_only(tmp_path):
     sim = run_cli('simulate', '--map', OFFICE_YAML, '--count', '1', '--seed', '3')
     good = json.loads(sim.stdout.splitlines()[0])
     lines = [b'\xef\xbb\xbf' + json.dumps(good).encode()]                  # a BOM on line 1
@@ -91,7 +93,7 @@ def test_d7_d8_cli_bad_truth_and_bad_bytes_are_errors_of_their_line_only(tmp_pat
     assert rows[7]['outcome'] == 'unusable_scan' and 'line 8' in rows[7]['error']
 
 
-def test_d10_an_obstacle_free_map_says_so_at_once():
+def test_an_obstacle_free_map_says_so_at_once():
     loc = Localizer(grid_map(np.zeros((50, 50), int)))
     scan = Scan(-2.0, 0.01, 0.05, 10.0, np.full(400, 2.0) + np.random.default_rng(0).random(400))
     for method in ('bnb', 'template_ccoeff'):
@@ -100,12 +102,12 @@ def test_d10_an_obstacle_free_map_says_so_at_once():
 
 
 @pytest.mark.skipif(surf_available(), reason='this OpenCV build has SURF')
-def test_d10_features_surf_without_surf_is_a_method_error_before_any_work():
+def test_features_surf_without_surf_is_a_method_error_before_any_work():
     with pytest.raises(MethodError, match='SURF is not in this OpenCV build'):
         resolve_method('features_surf')
 
 
-def test_d11_max_search_s_ends_any_search_as_incomplete():
+def test_max_search_s_ends_any_search_as_incomplete():
     m = small_room()
     scan = simulate_scan(m, Rigid2D(1.0, 2.0, 0.3), 270.0, 271, 4.0, rng=np.random.default_rng(2))
     loc = Localizer(m, LocalizerConfig(max_search_s=0.0))
@@ -115,7 +117,7 @@ def test_d11_max_search_s_ends_any_search_as_incomplete():
         assert not result.success
 
 
-def test_d11_a_cancel_does_not_wait_for_a_rotation_of_the_template_matcher():
+def test_a_cancel_does_not_wait_for_a_rotation_of_the_template_matcher():
     """On a large map one matchTemplate call takes about a second; the cancel is seen
     while it still runs (its thread is alive when Cancelled reaches the caller)."""
     grid = np.zeros((3000, 3000), int)

@@ -120,7 +120,7 @@ def test_goal_while_busy_is_aborted_with_a_reason(system):
         code, result = localize(env)
         assert code == 1 and result['outcome'] == 'busy'
         assert result['message'].startswith('busy: another localization is running')
-        assert server.output().count('refused: busy') == busy_lines + 1       # logged once (issue 18)
+        assert server.output().count('refused: busy') == busy_lines + 1       # logged once, not once per retry
     finally:
         slow_out, _ = slow.communicate(timeout=60)
     # the first goal ran on (to its end, its cancel, or its max_search_s)
@@ -203,7 +203,7 @@ def test_map_from_occupancy_grid_topic(tmp_path):
     rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']))
     node = rclpy.create_node('test_map_server', context=context)
     pub = node.create_publisher(OccupancyGrid, '/map', reliable(depth=1, latched=True))
-    # D5 (issue 18): a NaN origin was accepted and NaN poses published
+    # a NaN origin is refused with the reason (once it was accepted and NaN poses published)
     pub.publish(office_grid_msg(origin_x=float('nan')))   # before the server exists: transient local
     server = start_server(env, tmp_path / 'server.log', 'use_map_topic:=true')
     publisher = start_scan_publisher(env, tmp_path / 'pub.log', OFFICE_YAML, TRUTH)
@@ -249,8 +249,8 @@ def test_ambiguous_place_publishes_nothing_unless_asked(tmp_path):
 
 
 def test_search_limit_and_missing_surf_end_goals_with_their_reason(tmp_path):
-    """D11: max_search_s ends a goal that would search for minutes ("search incomplete");
-    D10: features_surf without SURF is a bad goal with the reason, not an internal error."""
+    """max_search_s ends a goal that would search for minutes ("search incomplete");
+    features_surf without SURF is a bad goal with the reason, not an internal error."""
     from global_loc.core.matchers.features import surf_available
     env = isolated_env()
     server = start_server(env, tmp_path / 'server.log', 'max_search_s:=1.0')

@@ -1,4 +1,4 @@
-"""Stopping in every state, in real processes (issue 18, D1-D3, D9): a SIGTERM or SIGINT
+"""Stopping in every state, in real processes: a SIGTERM or SIGINT
 ends the running goal with a result the client receives ("the server is stopping"),
 the server exits promptly and cleanly, and a client whose server disappears gives up
 with exit code 3."""
@@ -111,7 +111,7 @@ def test_a_timeout_beyond_its_bound_is_a_bad_goal_said_readably(tmp_path):
 
 @pytest.mark.parametrize('signum', [signal.SIGTERM, signal.SIGINT])
 def test_simulator_exits_cleanly_on_a_signal(tmp_path, signum):
-    """D9: pybullet's disconnect once raced the step timer (a segfault about 1 in 25)."""
+    """pybullet's disconnect once raced the step timer (a segfault about 1 in 25)."""
     env = isolated_env()
     for k in range(4):
         sim = start_sim(env, tmp_path / f'sim{k}.log', 'map_yaml:=' + str(OFFICE_YAML))

@@ -12,7 +12,7 @@ lower-left corner (nav2_map_server / nav_msgs/OccupancyGrid convention). Three f
 Everything that turns points, poses or covariances from one of these into another
 calls this class (as Cartographer's MapLimits is the one place a point becomes a cell);
 the compiled bnb kernels, which cannot call it, share one inline `image_point`
-(core/matchers/bnb/kernels.py) for the same "v grows downwards" rule.
+(core/pixel_kernels.py) for the same "v grows downwards" rule.
 """
 from __future__ import annotations
 

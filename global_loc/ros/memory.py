@@ -3,7 +3,7 @@
 A search allocates large temporary arrays (grids, heaps, score images) on whichever
 thread runs it. glibc gives each thread that contends for the heap its own arena (up to
 8 per core) and rarely returns their free pages, so a server's RSS kept rising with
-searches that ran on different executor and search threads (issue 18, D6: 247 ->
+searches that ran on different executor and search threads (measured: 247 ->
 1307 MB over 23 budget-exhausting goals). Two arenas, and giving free pages back after
 each request, keep it flat (measured by the soak benchmark, `--suites soak`).
 """

@@ -1,0 +1,61 @@
+"""The package's shape as the developers' standards state it: small files and functions,
+names and comments that point at things that exist. No ROS: the source is read as text."""
+import ast
+import pathlib
+import re
+
+PACKAGE = pathlib.Path(__file__).resolve().parents[1] / 'global_loc'
+MAX_FILE_LINES = 350
+MAX_FUNCTION_LINES = 60       # compiled (numba) kernels excepted: a kernel cannot call helpers cheaply
+SOURCES = sorted(PACKAGE.rglob('*.py'))
+# Being split now (issue 23 item 8); each entry goes when its split lands.
+PENDING = {'ros/server.py', 'bench/__main__.py:main', 'bench/report.py:write_report', 'bench/soak.py:soak_rows',
+           'core/map_io.py:load_map_yaml', 'core/matchers/bnb/grids.py:__init__'}
+
+
+def _is_kernel(fn: ast.FunctionDef) -> bool:
+    return any('jit' in ast.unparse(d) for d in fn.decorator_list)
+
+
+def test_no_file_is_over_350_lines():
+    long = {str(p.relative_to(PACKAGE)): n for p in SOURCES if (n := len(p.read_text().splitlines())) > MAX_FILE_LINES
+            and str(p.relative_to(PACKAGE)) not in PENDING}
+    assert not long, long
+
+
+def test_no_function_is_over_60_lines_outside_the_numba_kernels():
+    long = {}
+    for p in SOURCES:
+        for fn in ast.walk(ast.parse(p.read_text())):
+            if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)) and not _is_kernel(fn):
+                name = f'{p.relative_to(PACKAGE)}:{fn.name}'
+                if (n := fn.end_lineno - fn.lineno + 1) > MAX_FUNCTION_LINES and name not in PENDING:
+                    long[name] = n
+    assert not long, long
+
+
+def test_every_package_path_the_source_names_exists():
+    """A docstring's "see core/x.py" that outlived a move sends the reader nowhere."""
+    named = re.compile(r'\b((?:core|ros|bench|sim)(?:/[a-z_0-9]+)*/[a-z_0-9]+\.py)\b')
+    missing = [f'{p.relative_to(PACKAGE)}: {m}' for p in SOURCES for m in named.findall(p.read_text())
+               if not (PACKAGE / m).is_file()]
+    assert not missing, missing
+
+
+def test_a_name_said_to_live_in_a_file_is_defined_there():
+    """"`image_point` (core/pixel_kernels.py)": the file defines image_point."""
+    placed = re.compile(r'`(\w+)`\s*\(((?:core|ros|bench|sim)(?:/[a-z_0-9]+)*/[a-z_0-9]+\.py)\)')
+    wrong = [f'{p.relative_to(PACKAGE)}: {name} not in {path}' for p in SOURCES
+             for name, path in placed.findall(' '.join(p.read_text().split()))
+             if not re.search(rf'^(?:def|class) {name}\b|^{name}\s*=', (PACKAGE / path).read_text(), re.M)]
+    assert not wrong, wrong
+
+
+def test_tests_and_comments_say_the_behaviour_not_a_defect_number():
+    """Defect lists ("issue 18, D6") are not in the repository; a name like test_d4_* tells
+    a reader nothing."""
+    numbered = re.compile(r'\bdef test_d\d+_|\bD\d+(?:-D\d+)?\b(?=[,:) ])|\bissue 18\b')
+    files = SOURCES + sorted((PACKAGE.parent / 'test').glob('*.py'))
+    hits = [f'{p.name}:{k + 1}' for p in files if p.name != 'test_code_shape.py'
+            for k, line in enumerate(p.read_text().splitlines()) if numbered.search(line)]
+    assert not hits, hits
