@@ -92,6 +92,9 @@ def test_a_symmetric_room_stays_ambiguous_after_a_full_turn():
     outcome = turn.follower.finish()
     assert not outcome.settled and outcome.result.outcome == Outcome.AMBIGUOUS
     assert outcome.result.message.startswith('ambiguous after') and '4 place(s) still match' in outcome.result.message
+    # the scores are no longer the matcher's: the message says what they are
+    assert f'scored by their mean fit over the {outcome.scans} scans followed' in outcome.result.message
+    assert all(0.0 < h.score <= 1.0 for h in outcome.result.hypotheses)
     assert len(outcome.result.hypotheses) == 4 and outcome.turned_rad >= 2 * math.pi
     # the hypotheses were followed: one of them is where the robot is now
     assert min(h.pose.distance_to(turn.truth)[0] for h in outcome.result.hypotheses) < 0.1

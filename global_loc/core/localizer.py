@@ -54,7 +54,7 @@ class LocalizationResult:
     score: float = float('nan')
     confidence: float = 0.0
     covariance: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))   # x, y, yaw
-    hypotheses: list = field(default_factory=list)
+    hypotheses: list = field(default_factory=list)   # Hypothesis, best first (after motion: see core.motion)
     time_s: float = 0.0
     dropped: dict = field(default_factory=dict)
     search_stats: Any = None   # what the matcher's search did (bnb: SearchStats), for diagnostics

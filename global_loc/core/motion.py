@@ -209,15 +209,19 @@ class HypothesisFollower:
         if winner is None and search_fused:
             winner = settle(self.localizer, self.seen, self.base_T_laser)
             how = 'the scans seen, fused into one view, match one place'
+        # A followed hypothesis's score is its mean fit over the scans seen (pose_fitter's
+        # 0..1 measure), not the matcher's score of the one scan: the message says so.
         hypotheses = [Hypothesis(t.pose, t.evidence) for t in r.tracks]
         moved = f'{r.travelled:.2f} m and {math.degrees(r.turned):.0f} deg'
         elapsed = self.last.stamp - self.start_stamp if self.last is not None else 0.0
+        fits = f'scored by their mean fit over the {len(self.seen)} scans followed'
         if winner is None:
             result = dataclasses.replace(
                 self.result, hypotheses=hypotheses, pose=hypotheses[0].pose if hypotheses else None,
                 message=f'ambiguous after {elapsed:.0f} s of motion ({moved}): {len(hypotheses)} place(s) still '
-                        f'match; see the hypotheses')
+                        f'match; see the hypotheses ({fits})')
         else:
+            others = f' (the other hypotheses {fits})' if len(hypotheses) > 1 else ''
             result = dataclasses.replace(winner, hypotheses=[Hypothesis(winner.pose, winner.score)] + hypotheses[1:],
-                                         message=f'localized by motion after {moved}: {how}')
+                                         message=f'localized by motion after {moved}: {how}{others}')
         return FollowOutcome(winner is not None, result, r.travelled, r.turned, elapsed, len(self.seen), self.last)
