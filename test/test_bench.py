@@ -1,5 +1,6 @@
 """The benchmark harness end to end on a tiny run (real matchers, real report)."""
 import json
+import os
 import subprocess
 import sys
 
@@ -33,6 +34,37 @@ def test_search_share_table_splits_bnb_time_into_the_search_and_the_rest():
     assert search_share_table([r for r in rows if r['method'] != 'bnb'], lambda r: r['cond'], 'condition') == ''
 
 
+def test_the_report_opens_with_one_line_per_suite_against_the_thesis_method():
+    from global_loc.bench.summary import summary_section
+
+    def row(method, ok, success, t, **kw):
+        return {'suite': 'cut', 'method': method, 'ok': ok, 'ok_loose': ok, 'success': success, 'time_s': t, **kw}
+    rows = [row('bnb', True, True, 0.01), row('bnb', True, True, 0.03), row('bnb', False, False, 0.02),
+            row('template_ccoeff', True, True, 1.0), row('template_ccoeff', False, True, 2.0),
+            row('template_ccoeff', False, False, 3.0),
+            row('template_ccoeff', True, True, 9.0, angle_step=15)]      # the thesis method's variant: left out
+    lines = summary_section(rows)
+    assert lines[0] == '## Summary'
+    line = next(x for x in lines if x.startswith('| cut |'))
+    # bnb: 2 of 3 right, none confidently wrong, median 0.02; thesis: 1 of 3 right, 1 confidently wrong, median 2.0
+    assert line.endswith('| 3 | 67% | 0% | 0.020 | 0.029 | 3 | 33% | 33% | 2.00 | 2.90 | 100× |'), line
+
+
+def test_the_report_is_written_again_from_its_rows_without_running_anything(tmp_path):
+    import shutil
+    out = tmp_path / 'run'
+    shutil.copytree(os.path.join(os.path.dirname(__file__), '..', 'benchmarks', 'results', 'changed'), out)
+    (out / 'meta.json').write_text(json.dumps({'machine': {'cpu': 'x'}, 'command': 'python -m global_loc.bench',
+                                               'jobs': 1, 'threads': 1, 'wall_time_s': 1.0, 'quick': False,
+                                               'maps': {}}))
+    done = subprocess.run([sys.executable, '-m', 'global_loc.bench', '--report-only', '--out', str(out)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = (out / 'REPORT.md').read_text()
+    assert report.index('## Summary') < report.index('Command:') < report.index('## Changed world')
+    assert '| changed |' in report and 'localizations in' not in done.stdout
+
+
 def test_changed_world_suite_reports_each_level_with_a_plot(tmp_path):
     out = subprocess.run([sys.executable, '-m', 'global_loc.bench', '--quick', '--suites', 'changed', '--poses', '1',
                           '--methods', 'bnb', '--jobs', '1', '--out', str(tmp_path)],
@@ -62,3 +94,27 @@ def test_a_changed_world_differs_from_its_map_more_at_each_level_and_never_at_th
     rows, cols = np.ogrid[:office.height, :office.width]
     at_robot = np.hypot(cols - col, rows - row) * office.resolution <= ROBOT_CLEARANCE_M
     assert (world.occupancy[at_robot] == office.occupancy[at_robot]).all()
+
+
+def test_isolated_env_picks_a_dds_domain_no_process_here_uses():
+    """Several test and benchmark runs at once: a domain another run's server is on would
+    mix the two (seen: the fault suite's goals answered `not_active` by another run's server)."""
+    import socket
+
+    import pytest
+    processes = pytest.importorskip('global_loc.ros.processes')
+    free = max(d for d in processes.DOMAINS if d not in processes.domains_in_use())
+    held = []
+    try:
+        for d in processes.DOMAINS:        # a socket in every other domain's port range
+            if d != free:
+                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                held.append(s)
+                try:
+                    s.bind(('127.0.0.1', processes.PORT_BASE + processes.DOMAIN_GAIN * d + 240))
+                except OSError:            # taken: that domain is in use anyway
+                    pass
+        assert {processes.isolated_env()['ROS_DOMAIN_ID'] for _ in range(5)} == {str(free)}
+    finally:
+        for s in held:
+            s.close()

@@ -15,11 +15,34 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+# DDS ports (RTPS): domain d uses UDP ports PORT_BASE + DOMAIN_GAIN * d onwards, DOMAIN_GAIN of them
+PORT_BASE, DOMAIN_GAIN, DOMAINS = 7400, 250, range(1, 102)    # above 101 they reach the ephemeral ports
+
+
+def domains_in_use(udp_tables=('/proc/net/udp', '/proc/net/udp6')) -> set[int]:
+    """The DDS domains some process on this machine has a participant in (a UDP port bound
+    in the domain's range)."""
+    used = set()
+    for table in udp_tables:
+        try:
+            with open(table) as f:
+                lines = f.readlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            port = int(line.split()[1].rsplit(':', 1)[1], 16)
+            if port >= PORT_BASE:
+                used.add((port - PORT_BASE) // DOMAIN_GAIN)
+    return used
+
 
 def isolated_env() -> dict:
+    """os.environ on a DDS domain of its own: a random one that no process here uses now
+    (several test runs at once on one machine: a shared domain mixes their servers)."""
     env = dict(os.environ)
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    env['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 101))
+    free = [d for d in DOMAINS if d not in domains_in_use()]
+    env['ROS_DOMAIN_ID'] = str(random.SystemRandom().choice(free or DOMAINS))
     env['PYTHONUNBUFFERED'] = '1'
     return env
 
