@@ -3,7 +3,8 @@
 Runs the benchmark suites through the same Localizer the server uses, writes raw rows
 (rows.jsonl), REPORT.md and PNG plots into the output folder (default
 benchmarks/results/, or benchmarks/results/quick/ with --quick). Seeded: the same
-command makes the same trials; timings are the machine's.
+command makes the same trials; timings are the machine's. `--report-only` writes REPORT.md
+again from a folder's rows.jsonl and meta.json (a changed report without a rerun).
 """
 from __future__ import annotations
 
@@ -39,6 +40,8 @@ from .suites import (
 )
 from .worker import run_job, worker_init
 
+# Suites whose rows are not one localization each: the report reads them apart.
+NOTE_SUITES = ('relocalization', 'scaling', 'follow', 'soak')
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
@@ -65,7 +68,7 @@ def machine_info() -> dict:
             'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}
 
 
-def main(argv=None) -> int:
+def parse_args(argv):
     parser = argparse.ArgumentParser(prog='python -m global_loc.bench', description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='few poses and maps: a few minutes')
     parser.add_argument('--suites', default='cut,sim,carmen,prior,relocalization,scaling',
@@ -84,19 +87,16 @@ def main(argv=None) -> int:
     parser.add_argument('--scaling-sizes', default='', help='comma-separated map sizes of the scaling suite, cells '
                                                            f'a side (default: {",".join(map(str, SIZES))}; quick: '
                                                            'the first three)')
-    args = parser.parse_args(argv)
-    out = args.out or os.path.join(REPO, 'benchmarks', 'results', 'quick' if args.quick else '')
-    os.makedirs(out, exist_ok=True)
-    suites = args.suites.split(',')
-    methods = args.methods.split(',')
-    if not os.path.isdir(args.shared):
-        print(f'note: {args.shared} not found: real maps and logs are skipped', file=sys.stderr)
+    parser.add_argument('--report-only', action='store_true',
+                        help='run nothing: write REPORT.md again from the output folder\'s rows.jsonl and '
+                             'meta.json (the plots and failure pictures stay as they are)')
+    return parser.parse_args(argv)
 
-    t0 = time.time()
-    machine = machine_info()   # before this run writes anything: the commit it runs from
-    poses = args.poses or (6 if args.quick else 50)
-    maps = load_maps(args.shared, args.quick)
-    trials, notes = [], {}
+
+def build_trials(args, suites, maps, poses, notes) -> tuple[list, list, dict]:
+    """The seeded trials of the localization suites (maps gains the held-out CARMEN maps);
+    also the CARMEN trials and maps, which the relocalization suite reuses."""
+    trials = []
     if 'cut' in suites:
         trials += cut_trials(maps, max(1, poses // 5) if args.poses else (3 if args.quick else 10), args.seed)
     if 'sim' in suites:
@@ -116,18 +116,27 @@ def main(argv=None) -> int:
     if 'carmen' in suites:
         trials += carmen
         maps.update(carmen_maps)
-    jobs = [(i, t, m) for i, t in enumerate(trials) for m in methods
+    return trials, carmen, carmen_maps
+
+
+def localize_all(trials, methods, maps, jobs: int, threads: int) -> list[dict]:
+    """Every (trial, method) that applies, in `jobs` worker processes: one row each."""
+    work = [(i, t, m) for i, t in enumerate(trials) for m in methods
             if not (m not in ANGLE_STEP_METHODS and t.condition.get('angle_step', 5) != 5)
             and (t.suite != 'prior' or m in PRIOR_METHODS)]
     rows = []
     # spawn, not fork: a child forked after OpenCV's thread pool started (the parent's map
     # building) can deadlock in its first OpenCV call (seen: cv2.setNumThreads in _worker_init).
     ctx = mp.get_context('spawn')
-    threads = max(1, (os.cpu_count() or 1) // args.jobs)     # per worker: its share of the cores
-    with ctx.Pool(args.jobs, initializer=worker_init, initargs=(maps, threads)) as pool:
-        for row in tqdm(pool.imap_unordered(run_job, jobs, chunksize=2), total=len(jobs), desc='localizations',
+    with ctx.Pool(jobs, initializer=worker_init, initargs=(maps, threads)) as pool:
+        for row in tqdm(pool.imap_unordered(run_job, work, chunksize=2), total=len(work), desc='localizations',
                         file=sys.stderr):
             rows.append(row)
+    return rows
+
+
+def run_other_suites(args, suites, methods, maps, poses, threads, carmen, carmen_maps, out, notes) -> None:
+    """The suites that are not one localization per trial; their rows go into `notes`."""
     if 'relocalization' in suites:
         print('relocalization suite (kidnap and turn, watch) ...', file=sys.stderr)
         world = {**{n: m for n, m in maps.items() if '/' not in n}, **symmetric_maps()}
@@ -147,18 +156,61 @@ def main(argv=None) -> int:
         notes['follow'] = follow_rows(args.shared, args.scans_per_log or (12 if args.quick else 100), args.seed)
     if 'soak' in suites:
         print('soak suite (server + simulator processes, faults) ...', file=sys.stderr)
-        soak = soak_rows(args.soak_goals or (40 if args.quick else 1000), args.seed, os.path.join(out, 'soak_logs'))
-        notes['soak'] = soak_summary(soak)
-        notes['soak_rows'] = soak
+        notes['soak'] = soak_rows(args.soak_goals or (40 if args.quick else 1000), args.seed,
+                                  os.path.join(out, 'soak_logs'))
+
+
+def notes_from_rows(all_rows: list[dict]) -> tuple[list[dict], dict]:
+    """rows.jsonl split back into the localization rows and the other suites' notes, as the
+    report reads them (the soak suite as its summary)."""
+    notes = {s: [r for r in all_rows if r.get('suite') == s] for s in NOTE_SUITES}
+    notes = {s: rows for s, rows in notes.items() if rows}
+    if 'soak' in notes:
+        notes['soak'] = soak_summary(notes['soak'])
+    return [r for r in all_rows if r.get('suite') not in NOTE_SUITES], notes
+
+
+def report_again(out: str) -> int:
+    """REPORT.md from the committed rows.jsonl and meta.json of `out`, nothing run."""
+    with open(os.path.join(out, 'rows.jsonl')) as f:
+        rows, notes = notes_from_rows([json.loads(line) for line in f if line.strip()])
+    with open(os.path.join(out, 'meta.json')) as f:
+        meta = {**json.load(f), **notes}
+    write_report(rows, meta, out, maps=None, trials=None)
+    print(f'wrote {out}/REPORT.md again from its rows ({len(rows)} localizations)', file=sys.stderr)
+    return 0
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    out = args.out or os.path.join(REPO, 'benchmarks', 'results', 'quick' if args.quick else '')
+    if args.report_only:
+        return report_again(out)
+    os.makedirs(out, exist_ok=True)
+    suites, methods = args.suites.split(','), args.methods.split(',')
+    if not os.path.isdir(args.shared):
+        print(f'note: {args.shared} not found: real maps and logs are skipped', file=sys.stderr)
+    t0 = time.time()
+    machine = machine_info()   # before this run writes anything: the commit it runs from
+    poses = args.poses or (6 if args.quick else 50)
+    maps = load_maps(args.shared, args.quick)
+    notes = {}
+    trials, carmen, carmen_maps = build_trials(args, suites, maps, poses, notes)
+    threads = max(1, (os.cpu_count() or 1) // args.jobs)     # per worker: its share of the cores
+    rows = localize_all(trials, methods, maps, args.jobs, threads)
+    run_other_suites(args, suites, methods, maps, poses, threads, carmen, carmen_maps, out, notes)
     with open(os.path.join(out, 'rows.jsonl'), 'w') as f:
-        for row in rows + notes.get('relocalization', []) + notes.get('scaling', []) + notes.get('follow', []) + \
-                notes.pop('soak_rows', []):
+        for row in rows + [r for s in NOTE_SUITES for r in notes.get(s, [])]:
             f.write(json.dumps(row) + '\n')
     meta = {'machine': machine, 'command': 'python -m global_loc.bench ' + ' '.join(argv or sys.argv[1:]),
             'jobs': args.jobs, 'threads': threads, 'wall_time_s': round(time.time() - t0, 1), 'quick': args.quick,
             'maps': {n: f'{m.width} x {m.height} cells at {m.resolution} m' for n, m in maps.items() if '/' not in n},
-            **notes}
-    write_report(rows, meta, out, {n: m for n, m in maps.items()}, trials)
+            **{k: v for k, v in notes.items() if k not in NOTE_SUITES}}
+    with open(os.path.join(out, 'meta.json'), 'w') as f:
+        json.dump(meta, f, indent=1)
+    if 'soak' in notes:
+        notes['soak'] = soak_summary(notes['soak'])
+    write_report(rows, {**meta, **notes}, out, maps, trials)
     print(f'wrote {out}/REPORT.md ({len(rows)} localizations in {meta["wall_time_s"]} s)', file=sys.stderr)
     return 0
 

@@ -16,7 +16,13 @@ from ..plot import plot_localization  # noqa: E402
 from .changed import changed_section  # noqa: E402
 from .follow import follow_section  # noqa: E402
 from .sections import prior_section, scaling_section, soak_section  # noqa: E402
+from .summary import summary_section  # noqa: E402
 from .tables import BASELINE, group, pct, secs, stats  # noqa: E402
+
+BENCHMARKS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                          'benchmarks')
+RESULTS = os.path.join(BENCHMARKS, 'results')
+READING = os.path.join(BENCHMARKS, 'READING.md')
 
 
 def method_table(rows, label_fn, label_name, methods, baseline_rows=None) -> str:
@@ -64,68 +70,85 @@ def cond_label(r):
     return c + (f' / clutter {r["clutter"]}' if r.get('clutter') else '')
 
 
+def header(rows, meta) -> list[str]:
+    """The command, the machine and what the figures mean."""
+    return [f'Command: `{meta["command"]}` — {len(rows)} localizations in {meta["wall_time_s"]} s with '
+            f'{meta["jobs"]} worker process(es), {meta.get("threads", 1)} thread(s) each (cv2.setNumThreads: '
+            f'OpenCV\'s threads and bnb\'s search threads).', '',
+            '| machine | |', '|---|---|'] + [f'| {k} | {v} |' for k, v in meta['machine'].items()] + [''] + \
+           ['Success: position error < 0.2 m and heading error < 5° (the thesis criterion), also 0.5 m / 10°. '
+            '"Marked success but wrong": the result says `success` but misses 0.2 m / 5° (share of all trials). '
+            f'"time / baseline": median time over the thesis baseline ({BASELINE}, Δα = 5°) on the same trials '
+            'of the same run (< 1 is faster).', '',
+            'Maps: ' + ', '.join(f'{n} ({v})' for n, v in meta['maps'].items()) + '.', '']
+
+
+def sim_section(sim, methods, out, plots: bool) -> list[str]:
+    md = ['## Suite 2: simulated scans (pybullet Pioneer 3-DX, thesis §4.2)', '',
+          'Scans from the pybullet simulator (0.01 m range noise, 1% dropouts) at seeded free poses, '
+          'one factor varied at a time around 270° / 20 m / Δα 5°; "clutter 8": eight chairs, bins and '
+          'people not in the map. All maps pooled:', '',
+          method_table(sim, cond_label, 'condition', methods), '',
+          'Per map, 270° / 20 m / Δα 5°:', '',
+          method_table([r for r in sim if r['fov'] == 270 and r['range'] == 20 and r['angle_step'] == 5
+                        and not r['clutter']], lambda r: r['map'], 'map', methods), '',
+          '![success by factor](sim_factors.png)', '', '![time by map](sim_time.png)', '']
+    share = search_share_table([r for r in sim if r['angle_step'] == 5], cond_label, 'condition')
+    if share:
+        md += ['Where bnb\'s time goes (medians over the trials; "the rest": building the scan\'s angle tables, '
+               'refining the peaks, the free-space check, the covariance and the verdict):', '', share, '']
+    if plots:
+        plot_sim(sim, methods, out)
+    return md
+
+
+def cut_section(cut, methods, out, plots: bool) -> list[str]:
+    if plots:
+        plot_cut(cut, methods, out)
+    return ['## Suite 1: local maps cut from the map (thesis §4.1)', '',
+            'The map\'s own wall surfaces within 3, 6 or 10 m of a seeded free pose, in the pose\'s frame: '
+            'a perfect scan, the upper bound for each method.', '',
+            method_table(cut, lambda r: f'r = {r["radius"]:.0f} m / Δα {r["angle_step"]:g}°', 'cut', methods), '',
+            '![time against local map size](cut_time_vs_size.png)', '']
+
+
+def carmen_section(car, filters, methods, out, plots: bool) -> list[str]:
+    if plots:
+        plot_carmen(car, methods, out)
+    return ['## Suite 3: real laser logs (CARMEN, held-out folds)', '',
+            'Each log is cut into 5 time blocks; a scan is localized in the map (5 cm) built from the *other* '
+            'four blocks, never in a map that contains it. Kept: scans whose reference pose lies on mapped '
+            'free space and at least 70% of whose returns lie within two cells of a mapped wall.', '',
+            '| log | scans | pose on free space | explained by map | sampled |', '|---|---|---|---|---|'] + \
+           [f'| {log} | {c["scans"]} | {c["pose_on_free_space"]} | {c["explained_by_map"]} | {c["sampled"]} |'
+            for log, c in filters.items()] + \
+           ['', method_table(car, lambda r: r['log'], 'log', methods), '',
+            'Top-4 (truth among the first four hypotheses), useful for ACES, which is nearly four-fold '
+            'symmetric:', '',
+            '| log | ' + ' | '.join(methods) + ' |', '|---|' + '---|' * len(methods)] + \
+           [f'| {log} | ' + ' | '.join(pct(stats([r for r in lr if r['method'] == m])['top4']) for m in methods)
+            + ' |' for log, lr in sorted(group(car, lambda r: r['log']).items())] + \
+           ['', '![success per log](carmen.png)', '']
+
+
 def write_report(rows, meta, out, maps, trials) -> None:
+    """REPORT.md (and its plots) in `out`. Without maps and trials (a report written again
+    from committed rows) the plots and failure pictures already there are kept, not drawn."""
+    plots = trials is not None
     methods = sorted({r['method'] for r in rows}, key=lambda m: (m != BASELINE, m))
     by_suite = group(rows, lambda r: r['suite'])
-    md = ['# global_loc benchmark' + (' (quick)' if meta['quick'] else ''), '',
-          f'Command: `{meta["command"]}` — {len(rows)} localizations in {meta["wall_time_s"]} s with '
-          f'{meta["jobs"]} worker process(es), {meta.get("threads", 1)} thread(s) each (cv2.setNumThreads: '
-          f'OpenCV\'s threads and bnb\'s search threads).', '',
-          '| machine | |', '|---|---|'] + [f'| {k} | {v} |' for k, v in meta['machine'].items()] + ['']
-    md += ['Success: position error < 0.2 m and heading error < 5° (the thesis criterion), also 0.5 m / 10°. '
-           '"Marked success but wrong": the result says `success` but misses 0.2 m / 5° (share of all trials). '
-           f'"time / baseline": median time over the thesis baseline ({BASELINE}, Δα = 5°) on the same trials '
-           'of the same run (< 1 is faster).', '',
-           'Maps: ' + ', '.join(f'{n} ({v})' for n, v in meta['maps'].items()) + '.', '']
-    benchmarks = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
-                              'benchmarks')
-    reading = os.path.join(benchmarks, 'READING.md')
-    # the hand-written reading belongs to the committed report only
-    if os.path.abspath(out) == os.path.join(benchmarks, 'results') and os.path.exists(reading):
-        md += [open(reading).read(), '']
-
+    committed = os.path.abspath(out) == RESULTS      # the hand-written reading belongs to the committed report
+    md = ['# global_loc benchmark' + (' (quick)' if meta['quick'] else ''), '']
+    md += summary_section(rows + meta.get('scaling', []), RESULTS if committed else None)
+    md += header(rows, meta)
+    if committed and os.path.exists(READING):
+        md += [open(READING).read(), '']
     if 'sim' in by_suite:
-        sim = by_suite['sim']
-        md += ['## Suite 2: simulated scans (pybullet Pioneer 3-DX, thesis §4.2)', '',
-               'Scans from the pybullet simulator (0.01 m range noise, 1% dropouts) at seeded free poses, '
-               'one factor varied at a time around 270° / 20 m / Δα 5°; "clutter 8": eight chairs, bins and '
-               'people not in the map. All maps pooled:', '',
-               method_table(sim, cond_label, 'condition', methods), '',
-               'Per map, 270° / 20 m / Δα 5°:', '',
-               method_table([r for r in sim if r['fov'] == 270 and r['range'] == 20 and r['angle_step'] == 5
-                             and not r['clutter']], lambda r: r['map'], 'map', methods), '',
-               '![success by factor](sim_factors.png)', '', '![time by map](sim_time.png)', '']
-        share = search_share_table([r for r in sim if r['angle_step'] == 5], cond_label, 'condition')
-        if share:
-            md += ['Where bnb\'s time goes (medians over the trials; "the rest": building the scan\'s angle tables, '
-                   'refining the peaks, the free-space check, the covariance and the verdict):', '', share, '']
-        plot_sim(sim, methods, out)
+        md += sim_section(by_suite['sim'], methods, out, plots)
     if 'cut' in by_suite:
-        cut = by_suite['cut']
-        md += ['## Suite 1: local maps cut from the map (thesis §4.1)', '',
-               'The map\'s own wall surfaces within 3, 6 or 10 m of a seeded free pose, in the pose\'s frame: '
-               'a perfect scan, the upper bound for each method.', '',
-               method_table(cut, lambda r: f'r = {r["radius"]:.0f} m / Δα {r["angle_step"]:g}°', 'cut', methods), '',
-               '![time against local map size](cut_time_vs_size.png)', '']
-        plot_cut(cut, methods, out)
+        md += cut_section(by_suite['cut'], methods, out, plots)
     if 'carmen' in by_suite:
-        car = by_suite['carmen']
-        filt = meta.get('carmen_filters', {})
-        md += ['## Suite 3: real laser logs (CARMEN, held-out folds)', '',
-               'Each log is cut into 5 time blocks; a scan is localized in the map (5 cm) built from the *other* '
-               'four blocks, never in a map that contains it. Kept: scans whose reference pose lies on mapped '
-               'free space and at least 70% of whose returns lie within two cells of a mapped wall.', '',
-               '| log | scans | pose on free space | explained by map | sampled |', '|---|---|---|---|---|'] + \
-              [f'| {log} | {c["scans"]} | {c["pose_on_free_space"]} | {c["explained_by_map"]} | {c["sampled"]} |'
-               for log, c in filt.items()] + \
-              ['', method_table(car, lambda r: r['log'], 'log', methods), '',
-               'Top-4 (truth among the first four hypotheses), useful for ACES, which is nearly four-fold '
-               'symmetric:', '',
-               '| log | ' + ' | '.join(methods) + ' |', '|---|' + '---|' * len(methods)] + \
-              [f'| {log} | ' + ' | '.join(pct(stats([r for r in lr if r['method'] == m])['top4']) for m in methods)
-               + ' |' for log, lr in sorted(group(car, lambda r: r['log']).items())] + \
-              ['', '![success per log](carmen.png)', '']
-        plot_carmen(car, methods, out)
+        md += carmen_section(by_suite['carmen'], meta.get('carmen_filters', {}), methods, out, plots)
     if 'prior' in by_suite:
         md += prior_section(by_suite['prior'], out)
     if 'changed' in by_suite:
@@ -268,12 +291,13 @@ def failure_pictures(rows, trials, maps, out, count=2) -> list[str]:
     wrong.sort(key=lambda r: (not r['success'], r['suite'], r['trial']))
     md = [f'## Typical failures of the thesis baseline ({BASELINE})', ''] if wrong else []
     for i, r in enumerate(wrong[:count]):
-        t = trials[r['trial']]
-        path = os.path.join(out, f'failure_{i + 1}.png')
-        plot_localization(path, maps[t.map_name], scan_to_points(t.scan).points, Rigid2D(*r['estimate']), t.truth,
-                          base_T_laser=t.base_T_laser,
-                          title=f'{r["suite"]} / {r["map"]}: {BASELINE} {r["err_xy"]:.1f} m, '
-                                f'{r["err_yaw_deg"]:.0f}° off, score {r["score"]:.2f}, success={r["success"]}')
+        if trials is not None:        # else: the pictures already drawn for these rows
+            t = trials[r['trial']]
+            plot_localization(os.path.join(out, f'failure_{i + 1}.png'), maps[t.map_name],
+                              scan_to_points(t.scan).points, Rigid2D(*r['estimate']), t.truth,
+                              base_T_laser=t.base_T_laser,
+                              title=f'{r["suite"]} / {r["map"]}: {BASELINE} {r["err_xy"]:.1f} m, '
+                                    f'{r["err_yaw_deg"]:.0f}° off, score {r["score"]:.2f}, success={r["success"]}')
         md += [f'![failure {i + 1}](failure_{i + 1}.png)', '',
                f'{BASELINE}, {r["suite"]} on {r["map"]}: {r["err_xy"]:.2f} m and {r["err_yaw_deg"]:.1f}° off, '
                f'confidence {r["confidence"]:.2f}, marked success: {r["success"]}.', '']

@@ -1,0 +1,75 @@
+"""The report's first screen: per localization suite, bnb against the thesis method -
+success, confident-wrong, median and p95 time - and where the other suites' figures are."""
+from __future__ import annotations
+
+import json
+import math
+import os
+
+from .tables import BASELINE, group, pct, secs, stats
+
+# What each suite's trials are, in one line (the sections below the summary say more).
+SUITE_TRIALS = {
+    'cut': 'local maps cut from the map (perfect scans), r = 3-10 m',
+    'sim': 'pybullet scans, every condition pooled (field of view, range, clutter)',
+    'carmen': 'real 180° laser logs, held-out maps',
+    'prior': 'pybullet scans with a search prior, every radius pooled',
+    'changed': 'ray-cast scans in a world changed since its map, levels 0-3 pooled',
+    'scaling': 'tiled building maps 500² to 6000²',
+}
+# Suites with their own figures (not one localization per trial), by the folder they are committed in.
+OTHER_REPORTS = {'relocalization': 'keeping a robot localized', 'follow': 'settling by motion on real logs',
+                 'soak': 'real server processes under faults', 'one_job': 'one localization at a time, every core',
+                 'big_map': 'the 6000² tiled building'}
+
+
+def comparable(rows: list[dict]) -> list[dict]:
+    """Localization rows, the thesis method at its own Δα of 5° (the other steps are its variants)."""
+    return [r for r in rows if r.get('method') and 'ok' in r and 'success' in r and r.get('kind', 'localize') ==
+            'localize' and (r['method'] != BASELINE or r.get('angle_step', 5) == 5)]
+
+
+def summary_line(suite: str, rows: list[dict], where: str, trials: str = '') -> str:
+    bnb = stats([r for r in rows if r['method'] == 'bnb'])
+    thesis = stats([r for r in rows if r['method'] == BASELINE])
+
+    def cells(s):
+        return [pct(s['ok']), pct(s['marked_wrong']), secs(s['median']), secs(s['p95'])] if s['n'] else ['–'] * 4
+    faster = (f"{thesis['median'] / bnb['median']:.0f}×" if bnb['n'] and thesis['n'] and bnb['median'] > 0
+              and math.isfinite(thesis['median']) else '–')
+    return ' | '.join(['', f'{suite}{where}', trials or SUITE_TRIALS[suite], str(bnb['n']), *cells(bnb),
+                       str(thesis['n']), *cells(thesis), faster, '']).strip()
+
+
+def summary_section(rows: list[dict], results_dir: str | None = None) -> list[str]:
+    """One line per localization suite of `rows`; with `results_dir` (the committed results),
+    also the suites committed in its folders and links to the other suites' reports."""
+    by_suite = group(comparable(rows), lambda r: r['suite'])
+    lines = ['## Summary', '',
+             f'Per suite: bnb (the default) against the thesis method ({BASELINE}, Δα 5°) on the same trials. '
+             '"success": position within 0.2 m and heading within 5°; "confident-wrong": the answer says '
+             '`success` but misses that (share of all trials); times per localization; "faster": the thesis '
+             'method\'s median over bnb\'s.', '',
+             '| suite | trials | bnb n | success | confident-wrong | median [s] | p95 [s] | thesis n | success '
+             '| confident-wrong | median [s] | p95 [s] | faster |', '|---' * 13 + '|']
+    for suite in (s for s in SUITE_TRIALS if s in by_suite):
+        lines.append(summary_line(suite, by_suite[suite], ''))
+        if suite == 'sim':         # the thesis's own condition apart
+            main = [r for r in by_suite[suite] if r['fov'] == 270 and r['range'] == 20 and not r['clutter']]
+            lines.append(summary_line('sim 270° / 20 m', main, '', 'the same at 270° / 20 m without clutter'))
+    links = []
+    if results_dir is not None:
+        for suite in SUITE_TRIALS:
+            path = os.path.join(results_dir, suite, 'rows.jsonl')
+            if suite not in by_suite and os.path.exists(path):
+                with open(path) as f:
+                    committed = comparable([json.loads(line) for line in f if line.strip()])
+                if committed:
+                    lines.append(summary_line(suite, committed, f' ([run]({suite}/REPORT.md))'))
+        links = [f'[{name}]({name}/REPORT.md) ({what})' for name, what in OTHER_REPORTS.items()
+                 if os.path.exists(os.path.join(results_dir, name, 'REPORT.md'))]
+    if links:
+        lines += ['', 'Their own figures: ' + ', '.join(links) + '.']
+    if results_dir is not None and os.path.exists(os.path.join(results_dir, '..', 'DROPPED.md')):
+        lines += ['', 'Experiments measured and not kept: [DROPPED.md](../DROPPED.md).']
+    return lines + ['']
