@@ -25,7 +25,6 @@ from __future__ import annotations
 import math
 import os
 import sys
-import threading
 import time
 
 import numpy as np
@@ -33,93 +32,12 @@ from tqdm import tqdm
 
 from ..core.map_io import load_map_yaml
 from ..core.paths import default_map_yaml
-from ..core.transform import Rigid2D, pose_correct
+from ..core.transform import pose_correct
 from ..sim.raycast import sample_free_poses
 from ..sim.simulator import BASE_T_LASER
+from .ros_harness import Harness, rss_mb
 
 WARM_UP_GOALS = 20
-
-
-def rss_mb(pid: int) -> float:
-    try:
-        with open(f'/proc/{pid}/status') as f:
-            return next(int(line.split()[1]) / 1024 for line in f if line.startswith('VmRSS:'))
-    except (OSError, StopIteration):
-        return float('nan')
-
-
-class Harness:
-    """This process's ROS side: the action client, the true pose, /initialpose, kidnaps."""
-
-    def __init__(self, env: dict):
-        import rclpy
-        from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
-        from rclpy.action import ActionClient
-        from rclpy.executors import SingleThreadedExecutor
-
-        from global_loc_interfaces.action import Localize
-
-        from ..ros.convert import pose_from_msg
-        from ..ros.processes import reliable
-        self.Localize, self.PoseStamped = Localize, PoseStamped
-        self.pose_from_msg = pose_from_msg
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=int(env['ROS_DOMAIN_ID']))
-        self.node = rclpy.create_node('global_loc_soak', context=self.context)
-        self.client = ActionClient(self.node, Localize, 'localize')
-        self.truth = None
-        self.wrong_initialposes, self.initialposes = 0, 0
-        self.node.create_subscription(PoseStamped, '/sim/true_pose', self.on_truth, reliable(1, latched=True))
-        self.node.create_subscription(PoseWithCovarianceStamped, '/initialpose', self.on_initialpose, reliable())
-        self.set_pose = self.node.create_publisher(PoseStamped, '/sim/set_pose', 10)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.stopping = threading.Event()
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self):
-        while not self.stopping.is_set():
-            self.executor.spin_once(timeout_sec=0.02)
-
-    def on_truth(self, msg):
-        self.truth = self.pose_from_msg(msg.pose)
-
-    def on_initialpose(self, msg):
-        self.initialposes += 1
-        if self.truth is not None and not pose_correct(self.pose_from_msg(msg.pose.pose), self.truth):
-            self.wrong_initialposes += 1
-
-    def kidnap(self, pose: Rigid2D) -> None:
-        from ..ros.convert import pose_to_msg
-        msg = self.PoseStamped()
-        msg.header.frame_id = 'map'
-        msg.pose = pose_to_msg(pose)
-        self.set_pose.publish(msg)
-        deadline = time.monotonic() + 2.0      # until the simulator reports the new pose
-        while time.monotonic() < deadline and (self.truth is None or not pose_correct(self.truth, pose, 0.05, 1.0)):
-            time.sleep(0.01)
-        time.sleep(0.1)      # a scan taken after the teleport
-
-    def wait(self, future, timeout: float):
-        deadline = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.002)
-        return future.result() if future.done() else None
-
-    def send(self, **fields):
-        """Send a goal; (goal handle or None, seconds until accepted)."""
-        if not self.client.wait_for_server(timeout_sec=20.0):
-            return None
-        goal = self.Localize.Goal(timeout_s=5.0, **fields)
-        return self.wait(self.client.send_goal_async(goal), 20.0)
-
-    def close(self):
-        self.stopping.set()
-        self.thread.join(timeout=5.0)
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.context.try_shutdown()
 
 
 def soak_rows(goals: int, seed: int, log_dir: str) -> list[dict]:
@@ -140,7 +58,7 @@ def soak_rows(goals: int, seed: int, log_dir: str) -> list[dict]:
         return servers[-1]
 
     server = new_server()
-    h = Harness(env)
+    h = Harness(env, 'global_loc_soak')
     deadline = time.monotonic() + 20.0     # every goal is checked against a true pose
     while h.truth is None and time.monotonic() < deadline:
         time.sleep(0.05)
