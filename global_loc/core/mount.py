@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .limits import MAX_LASER_TILT_DEG
+from .mount3d import Mount3D, Mount3DError
 from .scan import Scan, ScanError
 from .transform import Rigid2D
 
@@ -48,28 +49,28 @@ class LaserMount:
         return LaserMount(Rigid2D(float(x), float(y), yaw), bool(r[2, 2] < 0))
 
     @staticmethod
+    def from_mount3d(mount: Mount3D) -> 'LaserMount':
+        """A 2D laser's view of its full mounting (MountError when it is tilted)."""
+        return LaserMount.from_rotation(mount.x, mount.y, mount.rotation())
+
+    @staticmethod
     def from_quaternion(x: float, y: float, qx: float, qy: float, qz: float, qw: float) -> 'LaserMount':
         """From a tf transform's translation (x, y) and rotation quaternion."""
-        q = np.array([qx, qy, qz, qw], dtype=float)
-        norm = float(np.linalg.norm(q))
-        if not math.isfinite(norm) or norm < 1e-9:
-            raise MountError(f'laser mounting quaternion must be finite and non-zero, got {q.tolist()}')
-        qx, qy, qz, qw = q / norm
-        rotation = [[1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
-                    [2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)],
-                    [2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)]]
-        return LaserMount.from_rotation(x, y, rotation)
+        try:
+            mount = Mount3D.from_quaternion(x, y, 0.0, qx, qy, qz, qw)
+        except Mount3DError as e:
+            raise MountError(f'laser mounting: {e}') from None
+        return LaserMount.from_mount3d(mount)
 
     @staticmethod
     def from_roll_pitch_yaw(x: float, y: float, roll: float, pitch: float, yaw: float) -> 'LaserMount':
         """From a position and ROS roll-pitch-yaw angles (rad; R = Rz(yaw) Ry(pitch) Rx(roll)):
         roll pi with yaw a is an upside-down laser whose x axis points at a."""
-        cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
-                                  math.cos(yaw), math.sin(yaw))
-        rotation = [[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                    [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                    [-sp, cp * sr, cp * cr]]
-        return LaserMount.from_rotation(x, y, rotation)
+        try:
+            mount = Mount3D(x, y, 0.0, roll, pitch, yaw)
+        except Mount3DError as e:
+            raise MountError(f'laser mounting: {e}') from None
+        return LaserMount.from_mount3d(mount)
 
     def upright(self, scan: Scan) -> Scan:
         """`scan` as an upright laser at `base_T_laser` would have taken it: the same scan

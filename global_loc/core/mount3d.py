@@ -48,6 +48,20 @@ class Mount3D:
         return Mount3D(*values)
 
     @staticmethod
+    def from_quaternion(x: float, y: float, z: float, qx: float, qy: float, qz: float, qw: float) -> 'Mount3D':
+        """From a tf transform's translation and rotation quaternion (normalized here)."""
+        q = np.array([qx, qy, qz, qw], dtype=float)
+        norm = float(np.linalg.norm(q))
+        if not math.isfinite(norm) or norm < 1e-9:
+            raise Mount3DError(f'a mounting quaternion must be finite and non-zero, got {q.tolist()}')
+        qx, qy, qz, qw = q / norm
+        # URDF's fixed-axis roll-pitch-yaw of the quaternion (pitch clamped at +-90 deg)
+        roll = math.atan2(2 * (qw * qx + qy * qz), 1 - 2 * (qx * qx + qy * qy))
+        pitch = math.asin(max(-1.0, min(1.0, 2 * (qw * qy - qz * qx))))
+        yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+        return Mount3D(float(x), float(y), float(z), roll, pitch, yaw)
+
+    @staticmethod
     def planar(base_T_laser: Rigid2D, z: float = 0.0) -> 'Mount3D':
         """An upright sensor at a 2D pose on the base (today's laser_x/laser_y/laser_yaw)."""
         return Mount3D(base_T_laser.x, base_T_laser.y, z, 0.0, 0.0, base_T_laser.yaw)

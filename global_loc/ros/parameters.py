@@ -13,7 +13,8 @@ import math
 from dataclasses import dataclass, replace
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import InvalidParameterValueException
+from rclpy.exceptions import InvalidParameterValueException, ParameterUninitializedException
+from rclpy.parameter import Parameter
 
 from ..core import limits
 from ..core.localizer import LocalizerConfig
@@ -23,8 +24,10 @@ from ..core.paths import default_map_yaml
 from ..core.request import BOUNDS, RequestDefaults
 from ..core.supervisor import SupervisorConfig
 from ..core.transform import Rigid2D
+from ..core.view import ViewConfig
+from .sensors import check_mount_value, sensor_specs
 
-_L, _S = LocalizerConfig(), SupervisorConfig()
+_L, _S, _V = LocalizerConfig(), SupervisorConfig(), ViewConfig()
 NO_RANGE = None
 
 
@@ -48,7 +51,21 @@ SPECS = [
     Spec('map_yaml', '', 'nav2 map YAML to localize in (empty: the shipped map)'),
     Spec('use_map_topic', False, 'take the map from an OccupancyGrid topic instead of map_yaml'),
     Spec('map_topic', '/map', 'OccupancyGrid topic (transient local, like nav2 map_server)'),
-    Spec('scan_topic', '/scan', 'sensor_msgs/LaserScan topic'),
+    Spec('scan_topics', ['/scan'], 'sensor_msgs/LaserScan topics merged into one view (the first: the primary '
+                                   'laser, which the health watch and resolve-by-motion use)'),
+    Spec('scan_topic', '', 'the one-laser alias of scan_topics (set: scan_topics is [scan_topic])'),
+    Spec('cloud_topics', [], 'sensor_msgs/PointCloud2 topics (3D lidars) merged into the view'),
+    Spec('merge_window_s', _V.merge_window_s, "a sensor whose newest message arrived longer before the newest "
+                                              "sensor's is left out of the view, s", (0.0, 10.0), live=True),
+    Spec('max_clock_offset_s', _V.max_clock_offset_s, "a sensor whose stamps are this far off the others' for "
+                                                      "messages that arrived together is left out, s",
+         (0.0, 3600.0), live=True),
+    Spec('cloud_z_min', _V.cloud_z_min, 'clouds (and tilted lasers): points lower above the floor, in the base '
+                                        'frame, are left out (the floor), m', (-100.0, 100.0), live=True),
+    Spec('cloud_z_max', _V.cloud_z_max, 'clouds (and tilted lasers): points higher are left out (the ceiling), m',
+         (-100.0, 100.0), live=True),
+    Spec('voxel_size', _V.voxel_size, "a merged view keeps one point per cell of this size (0: all), m",
+         (0.0, 10.0), live=True),
     Spec('initialpose_topic', '/initialpose', 'where confident poses are published (reliable, volatile as AMCL '
                                               'subscribes it)'),
     Spec('scan_timeout_s', 5.0, 'how long a request waits for a scan that arrives after it, s',
@@ -108,6 +125,8 @@ class ServerConfig:
     values: dict                      # parameter name -> value, every parameter
     localizer: LocalizerConfig
     supervisor: SupervisorConfig
+    view: ViewConfig = ViewConfig()
+    sensors: tuple = ()              # SensorSpec per configured sensor (topics, mountings from parameters)
 
     def __getitem__(self, name: str):
         return self.values[name]
@@ -121,7 +140,7 @@ class ServerConfig:
         return RequestDefaults(v['method'], v['angle_step_deg'], v['scan_timeout_s'])
 
 
-def build_config(values: dict) -> ServerConfig:
+def build_config(values: dict, mounts: dict | None = None) -> ServerConfig:
     """The snapshot of `values`; ConfigError naming the first value it cannot run with."""
     for name, value in values.items():
         lo_hi = BY_NAME[name].range
@@ -143,7 +162,13 @@ def build_config(values: dict) -> ServerConfig:
                                   start_delay_s=v['relocalize.start_delay_s'],
                                   min_interval_s=v['relocalize.min_interval_s'],
                                   max_attempts=v['relocalize.max_attempts'], settle_s=v['relocalize.settle_s'])
-    return ServerConfig(dict(values), localizer, supervisor)
+    try:
+        view = ViewConfig(merge_window_s=v['merge_window_s'], max_clock_offset_s=v['max_clock_offset_s'],
+                          cloud_z_min=v['cloud_z_min'], cloud_z_max=v['cloud_z_max'], voxel_size=v['voxel_size'])
+        sensors = sensor_specs(v['scan_topics'], v['scan_topic'], v['cloud_topics'], mounts or {})
+    except ValueError as e:
+        raise ConfigError(f'parameter {e}') from None
+    return ServerConfig(dict(values), localizer, supervisor, view, sensors)
 
 
 def _descriptor(spec: Spec) -> ParameterDescriptor:
@@ -164,17 +189,45 @@ def declare_parameters(node) -> dict[str, str]:
     reported, so configure fails with the reason instead of the constructor raising)."""
     problems = {}
     for spec in SPECS:
+        # an empty list says no type: declared as a string array without a value (read as [])
+        default = Parameter.Type.STRING_ARRAY if spec.default == [] else spec.default
         try:
-            node.declare_parameter(spec.name, spec.default, _descriptor(spec))
+            node.declare_parameter(spec.name, default, _descriptor(spec))
         except InvalidParameterValueException as e:
-            node.declare_parameter(spec.name, spec.default, _descriptor(spec), ignore_override=True)
+            node.declare_parameter(spec.name, default, _descriptor(spec), ignore_override=True)
             problems[spec.name] = f'parameter {spec.name}: {e}'
     return problems
 
 
+def parameter_value(node, name: str):
+    """A declared parameter's value ([] for a list declared without one)."""
+    try:
+        return node.get_parameter(name).value
+    except ParameterUninitializedException:
+        return []
+
+
 def read_config(node) -> ServerConfig:
-    """All parameters as they are now (on_configure); ConfigError when one is unusable."""
-    return build_config({spec.name: node.get_parameter(spec.name).value for spec in SPECS})
+    """All parameters as they are now (on_configure), each sensor's `sensors.<name>.mount`
+    declared when first configured; ConfigError when one is unusable."""
+    values = {spec.name: parameter_value(node, spec.name) for spec in SPECS}
+    mounts = {}
+    try:
+        specs = sensor_specs(values['scan_topics'], values['scan_topic'], values['cloud_topics'], {})
+    except ValueError as e:
+        raise ConfigError(f'parameter {e}') from None
+    for sensor in specs:
+        if not node.has_parameter(sensor.mount_parameter):
+            descriptor = ParameterDescriptor(description=f'{sensor.topic} on the base (x y z roll pitch yaw; m, '
+                                                         f'rad) when tf2 has none [applied on configure]')
+            try:
+                node.declare_parameter(sensor.mount_parameter, Parameter.Type.DOUBLE_ARRAY, descriptor)
+            except InvalidParameterValueException as e:    # the value it was started with; set it and configure
+                node.declare_parameter(sensor.mount_parameter, Parameter.Type.DOUBLE_ARRAY, descriptor,
+                                       ignore_override=True)
+                raise ConfigError(f'parameter {sensor.mount_parameter}: {e}') from None
+        mounts[sensor.topic] = parameter_value(node, sensor.mount_parameter) or None
+    return build_config(values, mounts)
 
 
 def check_set(current: dict, params, configured: bool) -> SetParametersResult:
@@ -184,6 +237,11 @@ def check_set(current: dict, params, configured: bool) -> SetParametersResult:
     stored-for-later value could not say so); a live one is accepted (`apply_live`)."""
     values = dict(current)
     for p in params:
+        if p.name.startswith('sensors.') and p.value is not None:     # None: declared without a value
+            problem = ('read at configure, not live - deactivate and clean up the node, set it, configure again'
+                       if configured else check_mount_value(p.value))
+            if problem:
+                return SetParametersResult(successful=False, reason=f'{p.name}: {problem}')
         if p.name not in BY_NAME:
             continue
         if configured and not BY_NAME[p.name].live:
@@ -203,5 +261,5 @@ def apply_live(active: ServerConfig, params) -> ServerConfig:
     live = {p.name: p.value for p in params if p.name in BY_NAME and BY_NAME[p.name].live}
     if not live:
         return active
-    fresh = build_config({**active.values, **live})
+    fresh = build_config({**active.values, **live}, {s.topic: s.mount for s in active.sensors})
     return replace(fresh, localizer=replace(fresh.localizer, bnb=active.localizer.bnb))

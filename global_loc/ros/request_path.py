@@ -1,13 +1,14 @@
 """One localization, whoever asked, in one direction: admit (active? busy?) -> validate
-(a core Request, defaults resolved once) -> localize (the newest map, the first scan after
-the request, converted once; motion when asked) -> publish (only a pose the server can
-vouch for, in the map that is still current). Every end is an outcome; nothing here
-raises to the executor.
+(a core Request, defaults resolved once) -> localize (the newest map, the view of every
+sensor's first message after the request - ros/sensors.py - converted once; motion when
+asked) -> publish (only a pose the server can vouch for, in the map that is still
+current). Every end is an outcome; nothing here raises to the executor.
 
 `RequestPath` gets its collaborators passed in (`Collaborators`); it reads no node's fields.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -21,12 +22,13 @@ from ..core.limits import BudgetError
 from ..core.map_slot import MapSlot
 from ..core.mount import LaserMount
 from ..core.outcome import Cancelled, Outcome
+from ..core.pose_history import PoseHistory
 from ..core.request import Request, RequestError, make_request
-from ..core.scan import ScanError
-from ..core.scan_waiter import ScanWaiter
+from ..core.scan import ScanError, scan_to_points
 from ..core.transform import Rigid2D, format_pose
 from .convert import ended_result, result_to_msg, scan_from_msg, stamp_seconds
 from .memory import release_free_memory
+from .sensors import SensorInputs, make_view
 
 CLOCKS_APART_S = 3600.0     # a scan stamped this far from the node's clock: use_sim_time set wrong?
 
@@ -40,8 +42,10 @@ def seconds(value: float) -> str:
 class Collaborators:
     config: Callable[[], object]                 # -> the current ros.parameters.ServerConfig
     maps: MapSlot                                # of Localizer
-    scans: ScanWaiter                            # of LaserScan
-    mount: Callable[[str], LaserMount]           # laser frame -> its mounting on the base (MountError)
+    sensors: SensorInputs                        # every sensor's newest message
+    mount: Callable                              # (SensorSpec, frame) -> its Mount3D on the base (NoMounting)
+    laser_mount: Callable[[str], LaserMount]     # the primary laser's frame -> its LaserMount (MountError)
+    odometry: PoseHistory                        # moves each reading to the view's stamp
     resolve_by_motion: Callable                  # (result, msg, base_T_laser, request, localizer, cancelled, feedback)
     publish_pose: Callable[[object], None]       # PoseWithCovarianceStamped -> initialpose_topic
     show: Callable                               # (result, scan, base_T_laser, stamp, map) -> RViz topics
@@ -83,7 +87,11 @@ class RequestPath:
     inactive_reason = 'not active: the server is not in the active lifecycle state'
 
     def refuse(self, outcome: Outcome, message: str, throttle: bool = False) -> Localize.Result:
-        self.c.logger.warn(f'refused: {message}', **({'throttle_duration_sec': 5.0} if throttle else {}))
+        # two call sites: rclpy refuses one call site logged with and without a throttle
+        if throttle:
+            self.c.logger.warn(f'refused: {message}', throttle_duration_sec=5.0)
+        else:
+            self.c.logger.warn(f'refused: {message}')
         return ended_result(outcome, message)
 
     # ---- localize ---------------------------------------------------------------------
@@ -93,34 +101,66 @@ class RequestPath:
         if maps.built is None or not self.c.maps.is_current(maps.generation):
             return self.refuse(Outcome.NO_MAP, maps.error or 'a newer map is still being prepared; retry')
         localizer = maps.built.reconfigured(self.c.config().localizer)
-        msg = self.wait_for_scan(request, start, cancelled, feedback)
-        if msg is None:
-            return self.refuse(Outcome.NO_SCAN, f'no scan on {self.c.config()["scan_topic"]} within '
-                                                f'{seconds(request.scan_timeout_s)} s')
+        newest = self.wait_for_view(request, start, cancelled, feedback)
+        if newest is None:
+            return self.refuse(Outcome.NO_SCAN, f'no {self.wanted()} within {seconds(request.scan_timeout_s)} s')
         try:
-            mount = self.c.mount(msg.header.frame_id)
-            base_T_laser = mount.base_T_laser
-            result = localizer.localize(mount.upright(scan_from_msg(msg)), method=request.method,
-                                        angle_step_deg=request.angle_step_deg, progress=self.progress(
-                                            cancelled, feedback), base_T_laser=base_T_laser, region=request.region)
-        except ScanError as e:      # MountError is one: a tilted laser
+            view, messages = make_view(self.c.sensors, newest, start, self.c.mount, self.c.odometry,
+                                       self.c.config().view)
+            self.log_view(view, messages)
+            result = localizer.localize_points(view.points, request.method, request.angle_step_deg, self.progress(
+                cancelled, feedback), base_T_laser=view.base_T_laser, region=request.region)
+        except ScanError as e:      # ViewError, MountError, NoMounting are ScanErrors
             return self.refuse(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
         except BudgetError as e:    # the goal asks for more work than a goal may do
             return self.refuse(Outcome.BAD_GOAL, f'bad request: {e}')
+        reference = max(messages.values(), key=lambda m: stamp_seconds(m.header.stamp))
+        shown = (view.points, view.base_T_laser, reference)
         if result.outcome == Outcome.AMBIGUOUS and request.resolve_by_motion_s > 0:
-            result, msg = self.c.resolve_by_motion(result, msg, base_T_laser, request, localizer, cancelled,
-                                                   feedback)
-        return self.publish(request, result, msg, mount, maps.generation, localizer.map, start)
+            result, shown = self.resolve_by_motion(result, messages, request, localizer, cancelled, feedback, shown)
+        if len(self.c.sensors.specs) > 1:
+            result = dataclasses.replace(result, message=f'{result.message} [{view.summary()}]')
+        return self.publish(request, result, shown, maps.generation, localizer.map, start)
 
-    def wait_for_scan(self, request: Request, start: float, cancelled, feedback):
+    def resolve_by_motion(self, result, messages: dict, request: Request, localizer, cancelled, feedback,
+                          shown: tuple) -> tuple:
+        """Followed over the primary laser's scans (the watch's laser); (result, what to show)."""
+        primary = next((s for s in self.c.sensors.specs if s.primary), None)
+        if primary is None or primary.topic not in messages:
+            note = (f'the primary laser {primary.topic} is not in the view' if primary is not None
+                    else 'it needs a laser (scan_topics)')
+            return dataclasses.replace(result, message=f'{result.message} (cannot resolve by motion: {note})'), shown
+        msg = messages[primary.topic]
+        try:
+            mount = self.c.laser_mount(msg.header.frame_id)
+        except ScanError as e:
+            return dataclasses.replace(result, message=f'{result.message} (cannot resolve by motion: {e})'), shown
+        result, last = self.c.resolve_by_motion(result, msg, mount.base_T_laser, request, localizer, cancelled,
+                                                feedback)
+        if last is msg:
+            return result, shown
+        return result, (scan_to_points(mount.upright(scan_from_msg(last))), mount.base_T_laser, last)
+
+    def wanted(self) -> str:
+        """What a request waits for: 'scan on /scan', 'message on /scan, /points'."""
+        specs = self.c.sensors.specs
+        what = 'scan' if all(s.kind == 'scan' for s in specs) else 'sensor message'
+        return f'{what} on {", ".join(s.topic for s in specs)}'
+
+    def wait_for_view(self, request: Request, start: float, cancelled, feedback):
         self.c.logger.info(f'localizing ({request.origin}): method {request.method}, waiting up to '
-                           f'{seconds(request.scan_timeout_s)} s for a scan on {self.c.config()["scan_topic"]}')
+                           f'{seconds(request.scan_timeout_s)} s for a {self.wanted()}')
         feedback(0.0, 'waiting_for_scan', 0.0)
-        msg = self.c.scans.wait_after(start, request.scan_timeout_s, cancelled)
-        if msg is not None:
+        newest = self.c.sensors.wait(start, request.scan_timeout_s, self.c.config().view.merge_window_s, cancelled)
+        if newest is not None:
             feedback(0.05, 'preparing_scan', 0.0)   # local map or points, per method
-            self.c.logger.info(f'matching a scan of {len(msg.ranges)} beams')
-        return msg
+        return newest
+
+    def log_view(self, view, messages: dict) -> None:
+        if len(self.c.sensors.specs) == 1 and hasattr(next(iter(messages.values())), 'ranges'):
+            self.c.logger.info(f'matching a scan of {len(next(iter(messages.values())).ranges)} beams')
+        else:
+            self.c.logger.info(f'matching a scan view: {view.summary()}')
 
     @staticmethod
     def progress(cancelled, feedback):
@@ -137,15 +177,17 @@ class RequestPath:
         return report
 
     # ---- publish ------------------------------------------------------------------------
-    def publish(self, request: Request, result, msg, mount: LaserMount, generation: int, occupancy_map,
+    def publish(self, request: Request, result, shown: tuple, generation: int, occupancy_map,
                 start: float) -> Localize.Result:
         """The action result; the pose on /initialpose when it is confident (or asked for
-        anyway) and its map is still the newest received."""
+        anyway) and its map is still the newest received. `shown`: (points, base_T_laser,
+        message) the pose is of - the view's newest, or resolve-by-motion's last scan."""
         config = self.c.config()
+        points, base_T_laser, msg = shown
         out = result_to_msg(result, config['map_frame'], msg.header.stamp, time.monotonic() - start)
         out.scan_stamp = msg.header.stamp
         out.scan_age_s = self.scan_age(msg)
-        self.c.show(result, mount.upright(scan_from_msg(msg)), mount.base_T_laser, msg.header.stamp, occupancy_map)
+        self.c.show(result, points, base_T_laser, msg.header.stamp, occupancy_map)
         summary = result.message
         if result.pose is not None:
             summary += f': {format_pose(result.pose)}, score {result.score:.3f}, {result.time_s:.2f} s'

@@ -28,7 +28,7 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import String
 from std_srvs.srv import Empty, Trigger
@@ -40,17 +40,18 @@ from ..core.localizer import Localizer
 from ..core.map_io import load_map_yaml
 from ..core.map_slot import MapSlot
 from ..core.motion import pose_fitter
+from ..core.mount import LaserMount, MountError
 from ..core.outcome import Outcome
 from ..core.pose_history import PoseHistory
 from ..core.scan import ScanError, scan_to_points
 from ..core.scan_waiter import ScanWaiter
 from .convert import map_from_msg, pose_from_msg, scan_from_msg, stamp_seconds
 from .motion import resolve_by_motion
-from .mounting import LaserMounting
 from .node_main import exit_process, run_node
-from .parameters import BY_NAME, ConfigError, apply_live, check_set, declare_parameters, read_config
+from .parameters import BY_NAME, ConfigError, apply_live, check_set, declare_parameters, parameter_value, read_config
 from .request_path import Collaborators, RequestPath, goal_fields, trigger_message
 from .rviz import hypotheses_msg, local_map_msg, markers_msg
+from .sensors import SensorInputs, SensorMounts, subscribe
 from .watch import HealthWatch
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -67,7 +68,8 @@ class GlobalLocServer(LifecycleNode):
         self.config = None                              # ServerConfig while configured
         self.group = ReentrantCallbackGroup()
         self.maps: MapSlot[Localizer] = MapSlot(self.build_localizer, self.on_map_change)
-        self.scans: ScanWaiter[LaserScan] = ScanWaiter()
+        self.sensors = SensorInputs()                          # every sensor's newest message (the view)
+        self.scans: ScanWaiter[LaserScan] = ScanWaiter()       # the primary laser's (watch, resolve-by-motion)
         self.odom: ScanWaiter[Odometry] = ScanWaiter()        # the newest odometry (has any come?)
         self.odom_history = PoseHistory()                      # odometry by stamp
         self.errors: dict[str, int] = {}                       # callback name -> exceptions caught
@@ -75,12 +77,13 @@ class GlobalLocServer(LifecycleNode):
         self.subs: list = []
         self.own_timers: list = []
         self.watch = None
-        self.mounting = None
+        self.mounts = None
         self.cmd_vel_pub = None
         self._in_flight, self._in_flight_lock = 0, threading.Lock()
         self.path = RequestPath(Collaborators(
-            config=lambda: self.config, maps=self.maps, scans=self.scans,
-            mount=lambda frame: self.mounting.mount(frame), resolve_by_motion=self.resolve_by_motion,
+            config=lambda: self.config, maps=self.maps, sensors=self.sensors,
+            mount=lambda spec, frame: self.mounts.mount(spec, frame), laser_mount=self.laser_mount,
+            odometry=self.odom_history, resolve_by_motion=self.resolve_by_motion,
             publish_pose=lambda msg: self.pubs['initialpose'].publish(msg), show=self.show,
             clock_now=lambda: self.get_clock().now().nanoseconds * 1e-9, logger=self.get_logger()))
         self.add_on_set_parameters_callback(self.on_set_parameters)
@@ -114,10 +117,10 @@ class GlobalLocServer(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         self.config = config
         self.path.stopping.clear()
-        if self.mounting is None:        # one tf listener for the node's life
-            self.mounting = LaserMounting(self, config['base_frame'], config.localizer.base_T_laser,
-                                          config['laser_roll'])
-        self.mounting.configure(config['base_frame'], config.localizer.base_T_laser, config['laser_roll'])
+        if self.mounts is None:        # one tf listener for the node's life
+            self.mounts = SensorMounts(self)
+        self.mounts.configure(config)
+        self.sensors.configure(config.sensors)
         self.create_interfaces(config)
         if config['use_map_topic']:
             self.maps.clear(f'waiting for a map on {config["map_topic"]}')
@@ -142,9 +145,9 @@ class GlobalLocServer(LifecycleNode):
         self.watch = HealthWatch(config.supervisor, config['map_frame'], self.fit_at, self.odom_history,
                                  self.pubs['status'].publish, self.pubs['diagnostics'].publish,
                                  lambda: self.get_clock().now().to_msg(), self.get_logger(), self.get_name(),
-                                 extra_values=lambda: {f'errors.{k}': n for k, n in self.errors.items()})
-        self.subs = [self.create_subscription(LaserScan, config['scan_topic'], self.guarded(self.scans.put),
-                                              qos_profile_sensor_data, callback_group=g),
+                                 extra_values=lambda: {**{f'errors.{k}': n for k, n in self.errors.items()},
+                                                       **self.sensors.diagnostics()})
+        self.subs = subscribe(self, config.sensors, self.sensors, self.scans, self.guarded, g) + [
                      self.create_subscription(Odometry, config['odom_topic'], self.guarded(self.on_odom), 20,
                                               callback_group=g),
                      self.create_subscription(PoseWithCovarianceStamped, config['pose_topic'],
@@ -162,7 +165,7 @@ class GlobalLocServer(LifecycleNode):
         self.path.active = True
         c = self.config
         self.get_logger().info(f'ready: action "localize", services ~/trigger and ~/reinitialize_global_localization, '
-                               f'scans on {c["scan_topic"]}, poses to {c["initialpose_topic"]}, '
+                               f'sensors {", ".join(s.topic for s in c.sensors)}, poses to {c["initialpose_topic"]}, '
                                f'default method {c["method"]}')
         return super().on_activate(state)
 
@@ -214,7 +217,7 @@ class GlobalLocServer(LifecycleNode):
         """Refuse what the server cannot run with, and while configured what it reads only at
         configure (the reasons say why); live ones apply to the next request."""
         current = self.config.values if self.config is not None else \
-            {name: self.get_parameter(name).value for name in BY_NAME}
+            {name: parameter_value(self, name) for name in BY_NAME}
         return check_set(current, params, configured=self.config is not None)
 
     def on_parameters_set(self, params) -> None:
@@ -225,8 +228,7 @@ class GlobalLocServer(LifecycleNode):
         self.config = apply_live(self.config, params)
         if self.watch is not None:
             self.watch.reconfigure(self.config.supervisor)
-        self.mounting.configure(self.config['base_frame'], self.config.localizer.base_T_laser,
-                                self.config['laser_roll'])
+        self.mounts.configure(self.config)
         names = ', '.join(f'{p.name}={p.value}' for p in params)
         self.get_logger().info(f'parameters set: {names}')
 
@@ -267,11 +269,18 @@ class GlobalLocServer(LifecycleNode):
         if localizer is None:
             return None
         try:
-            mount = self.mounting.mount(scan_msg.header.frame_id)
+            mount = self.laser_mount(scan_msg.header.frame_id)
             points = scan_to_points(mount.upright(scan_from_msg(scan_msg)))
         except ScanError:
             return None
         return pose_fitter(localizer.matcher(WATCH_METHOD), points, mount.base_T_laser)(pose)[0]
+
+    def laser_mount(self, frame: str) -> LaserMount:
+        """The primary laser's mounting as the 2D methods take it (MountError: tilted, none)."""
+        primary = next((s for s in self.config.sensors if s.primary), None)
+        if primary is None:
+            raise MountError('no laser configured (scan_topics is empty)')
+        return LaserMount.from_mount3d(self.mounts.mount(primary, frame))
 
     def on_health_tick(self) -> None:
         if not self.path.active:
@@ -297,13 +306,13 @@ class GlobalLocServer(LifecycleNode):
             publish_cmd_vel=self.cmd_vel_pub.publish, rotate_speed=c['rotate_speed'], odom_topic=c['odom_topic'],
             cancelled=cancelled, feedback=feedback, log=self.get_logger().info)
 
-    def show(self, result, scan, base_T_laser, stamp, occupancy_map) -> None:
+    def show(self, result, points, base_T_laser, stamp, occupancy_map) -> None:
         """The RViz topics for this localization."""
         frame = self.config['map_frame']
         self.pubs['hypotheses'].publish(hypotheses_msg(result, frame, stamp))
         self.pubs['markers'].publish(markers_msg(result, frame, stamp))
         if result.pose is not None:
-            self.pubs['local_map'].publish(local_map_msg(scan_to_points(scan), occupancy_map.resolution,
+            self.pubs['local_map'].publish(local_map_msg(points, occupancy_map.resolution,
                                                          self.config['opening_kernel'], result.pose * base_T_laser,
                                                          frame, stamp, occupancy_map.diagonal_m))
 
