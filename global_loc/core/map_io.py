@@ -11,6 +11,7 @@ import math
 import os
 import stat
 from dataclasses import dataclass
+from typing import Optional
 
 import cv2
 import numpy as np
@@ -182,11 +183,19 @@ def _require(doc, key, path):
     return doc[key]
 
 
-def load_map_yaml(path) -> OccupancyMap:
-    """Load a nav2_map_server map (YAML + PGM/PNG/...), with its semantics: `image`
-    relative to the YAML, `negate`, `occupied_thresh`, `free_thresh`, `mode`
-    (trinary | scale | raw), `origin` [x, y, yaw]; colour images are averaged to grey."""
-    path = os.fspath(path)
+@dataclass(frozen=True)
+class _MapYaml:
+    image_path: str
+    resolution: float
+    origin: list
+    negate: int
+    occupied_thresh: float
+    free_thresh: float
+    mode: str
+
+
+def _read_map_yaml(path: str) -> _MapYaml:
+    """The YAML's parameters, each checked, the image's path resolved against the YAML's folder."""
     check_regular_file(path, path, 'map YAML')
     try:
         with open(path) as f:
@@ -195,7 +204,6 @@ def load_map_yaml(path) -> OccupancyMap:
         raise MapError(f'{path}: not valid YAML: {e}') from None
     if not isinstance(doc, dict):
         raise MapError(f'{path}: expected a mapping of map parameters, got {type(doc).__name__}')
-
     image_name = _require(doc, 'image', path)
     if not isinstance(image_name, str) or not image_name:
         raise MapError(f'{path}: key "image" must be a file name')
@@ -219,9 +227,13 @@ def load_map_yaml(path) -> OccupancyMap:
         raise MapError(f'{path}: negate must be 0 or 1, got {negate}')
     if mode not in ('trinary', 'scale', 'raw'):
         raise MapError(f'{path}: mode must be trinary, scale or raw, got {mode!r}')
-
     image_path = image_name if os.path.isabs(image_name) else \
         os.path.join(os.path.dirname(os.path.abspath(path)), image_name)
+    return _MapYaml(image_path, resolution, origin, negate, occ_th, free_th, mode)
+
+
+def _read_shade(image_path: str, path: str) -> tuple[np.ndarray, Optional[np.ndarray]]:
+    """The image as nav2 reads it: (grey shade 0..255 as float, alpha channel or None)."""
     check_regular_file(image_path, path, f'image {image_path}')
     image = cv2.imread(image_path, cv2.IMREAD_UNCHANGED)
     if image is None or image.size == 0:
@@ -229,28 +241,38 @@ def load_map_yaml(path) -> OccupancyMap:
     check_cells(image.shape[1], image.shape[0], path)    # before the per-cell float conversions below
     if image.dtype != np.uint8:   # 16-bit PGM/PNG: scale to 8 bits as map_server's 0..255 shade
         image = (image.astype(np.float64) / np.iinfo(image.dtype).max * 255.0).round().astype(np.uint8)
-    alpha = None
     if image.ndim == 3:
-        if image.shape[2] == 4:
-            alpha = image[:, :, 3]
-        shade = image[:, :, :3].mean(axis=2)   # nav2: colour channels averaged
-    else:
-        shade = image.astype(np.float64)
+        alpha = image[:, :, 3] if image.shape[2] == 4 else None
+        return image[:, :, :3].mean(axis=2), alpha   # nav2: colour channels averaged
+    return image.astype(np.float64), None
 
-    if mode == 'raw':
+
+def _occupancy(shade: np.ndarray, alpha: Optional[np.ndarray], y: _MapYaml) -> np.ndarray:
+    """Occupancy values (int16: 0 free, 100 occupied, -1 unknown, scale: between) by `y.mode`."""
+    if y.mode == 'raw':
         grid = shade.round().astype(np.int16)
         grid[grid > 100] = UNKNOWN
-    else:
-        occ = shade / 255.0 if negate else (255.0 - shade) / 255.0
-        grid = np.full(shade.shape, UNKNOWN, dtype=np.int16)
-        grid[occ > occ_th] = OCCUPIED
-        grid[occ < free_th] = FREE
-        if mode == 'scale':
-            mid = (occ >= free_th) & (occ <= occ_th)
-            grid[mid] = np.rint(99.0 * (occ[mid] - free_th) / (occ_th - free_th)).astype(np.int16)
-            if alpha is not None:
-                grid[alpha < 255] = UNKNOWN
-    return make_map(grid.astype(np.int8), resolution, Rigid2D(*origin), path)
+        return grid
+    occ = shade / 255.0 if y.negate else (255.0 - shade) / 255.0
+    grid = np.full(shade.shape, UNKNOWN, dtype=np.int16)
+    grid[occ > y.occupied_thresh] = OCCUPIED
+    grid[occ < y.free_thresh] = FREE
+    if y.mode == 'scale':
+        mid = (occ >= y.free_thresh) & (occ <= y.occupied_thresh)
+        grid[mid] = np.rint(99.0 * (occ[mid] - y.free_thresh) / (y.occupied_thresh - y.free_thresh)).astype(np.int16)
+        if alpha is not None:
+            grid[alpha < 255] = UNKNOWN
+    return grid
+
+
+def load_map_yaml(path) -> OccupancyMap:
+    """Load a nav2_map_server map (YAML + PGM/PNG/...), with its semantics: `image`
+    relative to the YAML, `negate`, `occupied_thresh`, `free_thresh`, `mode`
+    (trinary | scale | raw), `origin` [x, y, yaw]; colour images are averaged to grey."""
+    path = os.fspath(path)
+    y = _read_map_yaml(path)
+    shade, alpha = _read_shade(y.image_path, path)
+    return make_map(_occupancy(shade, alpha, y).astype(np.int8), y.resolution, Rigid2D(*y.origin), path)
 
 
 def save_map_yaml(occupancy_map: OccupancyMap, yaml_path, image_name=None) -> None:

@@ -78,19 +78,7 @@ class PrecomputationGridStack:
             flat[start:start + n].reshape(height >> int(shift[h]), width >> int(shift[h]))[:] = plane[::k, ::k]
         del plane, base
         self.planes = Planes(flat, shift, np.array([width >> int(s) for s in shift], np.int64), p, width, height)
-        # free_blocks: per level h, block (u >> h, v >> h) of the map holds a free cell
-        free = occupancy_map.free
-        free_offsets, free_width, blocks = [], [], []
-        for h in range(options.levels):
-            k = 2 ** h
-            rows, cols = -(-free.shape[0] // k), -(-free.shape[1] // k)
-            padded = np.zeros((rows * k, cols * k), bool)
-            padded[:free.shape[0], :free.shape[1]] = free
-            free_offsets.append(sum(len(b) for b in blocks))
-            free_width.append(cols)
-            blocks.append(padded.reshape(rows, k, cols, k).any(axis=(1, 3)).astype(np.uint8).ravel())
-        self.free = FreeBlocks(np.concatenate(blocks), np.array(free_offsets, np.int64),
-                               np.array(free_width, np.int64))
+        self.free = free_blocks(occupancy_map.free, options.levels)
         self.nbytes = self.field.nbytes + self.planes.flat.nbytes + self.free.flags.nbytes + self.occupied.nbytes
 
     def free_block(self, level: int, u, v):
@@ -116,3 +104,17 @@ class PrecomputationGridStack:
         for h in range(1, self.options.levels):
             out[h] = self.level_grids[h][np.searchsorted(self.level_margins[h], self.margin(h, ranges / r_max))]
         return out
+
+
+def free_blocks(free: np.ndarray, levels: int) -> FreeBlocks:
+    """Per level h, whether block (u >> h, v >> h) of the map holds a free cell."""
+    offsets, widths, blocks = [], [], []
+    for h in range(levels):
+        k = 2 ** h
+        rows, cols = -(-free.shape[0] // k), -(-free.shape[1] // k)
+        padded = np.zeros((rows * k, cols * k), bool)
+        padded[:free.shape[0], :free.shape[1]] = free
+        offsets.append(sum(len(b) for b in blocks))
+        widths.append(cols)
+        blocks.append(padded.reshape(rows, k, cols, k).any(axis=(1, 3)).astype(np.uint8).ravel())
+    return FreeBlocks(np.concatenate(blocks), np.array(offsets, np.int64), np.array(widths, np.int64))
