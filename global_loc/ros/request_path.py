@@ -21,7 +21,7 @@ from global_loc_interfaces.action import Localize
 from ..core.limits import BudgetError
 from ..core.map_slot import MapSlot
 from ..core.mount import LaserMount
-from ..core.outcome import Cancelled, Outcome
+from ..core.outcome import CanceledError, Outcome
 from ..core.pose_history import PoseHistory
 from ..core.request import Request, RequestError, make_request
 from ..core.scan import ScanError, scan_to_points
@@ -73,7 +73,7 @@ class RequestPath:
             return self.run(request, lambda: cancelled() or self.stopping.is_set(), feedback)
         except RequestError as e:
             return self.refuse(Outcome.BAD_GOAL, f'bad request: {e}')
-        except Cancelled:
+        except CanceledError:
             reason = 'canceled' if not self.stopping.is_set() else 'canceled: the server is stopping'
             self.c.logger.info(reason)
             return ended_result(Outcome.CANCELED, reason)
@@ -118,7 +118,8 @@ class RequestPath:
         shown = (view.points, view.base_T_laser, reference)
         if result.outcome == Outcome.AMBIGUOUS and request.resolve_by_motion_s > 0:
             result, shown = self.resolve_by_motion(result, messages, request, localizer, cancelled, feedback, shown)
-        if len(self.c.sensors.specs) > 1:
+        specs = self.c.sensors.specs
+        if len(specs) > 1 or specs[0].kind != 'scan':     # one laser alone: its messages as they always were
             result = dataclasses.replace(result, message=f'{result.message} [{view.summary()}]')
         return self.publish(request, result, shown, maps.generation, localizer.map, start)
 
@@ -170,7 +171,7 @@ class RequestPath:
 
         def report(fraction, best):
             if cancelled():
-                raise Cancelled()
+                raise CanceledError()
             if time.monotonic() - last[0] > 0.1 or fraction >= 1.0:
                 last[0] = time.monotonic()
                 feedback(0.05 + 0.9 * fraction, 'matching', best)
