@@ -100,7 +100,7 @@ def localize_main(args) -> int:
     bnb = BranchAndBoundOptions(**{name: getattr(args, f'bnb_{name}') for name, *_ in option_fields()})
     mount, mounting = laser_mounting(args)
     base_T_laser = mount.base_T_laser
-    config = LocalizerConfig(method=args.method, angle_step_deg=args.angle_step, opening_kernel=args.opening_kernel,
+    config = LocalizerConfig(method=args.method, angle_step_deg=args.angle_step, closing_kernel=args.closing_kernel,
                              bnb=bnb, max_search_s=args.max_search_s, base_T_laser=base_T_laser)
     localizer = Localizer(occupancy_map, config)
     method = localizer.matcher(args.method).name   # unknown method: fail before reading any scan
@@ -194,8 +194,10 @@ def build_parser() -> argparse.ArgumentParser:
     loc.add_argument('--angle-step', type=float, default=LocalizerConfig.angle_step_deg, help='Δα, degrees')
     loc.add_argument('--max-search-s', type=float, default=math.inf,
                      help='seconds a search may take, then "search incomplete" (default: no limit)')
-    loc.add_argument('--opening-kernel', type=int, default=LocalizerConfig.opening_kernel,
-                     help='opening kernel of the local map, pixels (0 = off)')
+    loc.add_argument('--closing-kernel', '--opening-kernel', dest='closing_kernel', type=int,
+                     default=LocalizerConfig.closing_kernel,
+                     help='kernel of the morphological closing of the local map\'s obstacles, pixels (0 = off); '
+                          '--opening-kernel, the thesis\'s name and the ROS parameter\'s, is the same flag')
     loc.add_argument('--plot', help='save a picture per scan (OUT.png, OUT_002.png, ...)')
     for name, kind, default, help_text in option_fields():
         loc.add_argument(f'--bnb-{name.replace("_", "-")}', dest=f'bnb_{name}', type=kind, default=default,

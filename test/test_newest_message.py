@@ -5,12 +5,12 @@ import time
 
 import pytest
 
-from global_loc.core.outcome import Cancelled
-from global_loc.core.scan_waiter import ScanWaiter
+from global_loc.core.newest_message import NewestMessage
+from global_loc.core.outcome import CanceledError
 
 
 def test_a_scan_from_before_the_goal_is_not_taken():
-    waiter = ScanWaiter()
+    waiter = NewestMessage()
     waiter.put('old')
     since = time.monotonic() + 1e-6
     assert waiter.wait_after(since, 0.2) is None          # timed out: 'old' arrived before
@@ -19,7 +19,7 @@ def test_a_scan_from_before_the_goal_is_not_taken():
 
 
 def test_the_newest_scan_wins():
-    waiter = ScanWaiter()
+    waiter = NewestMessage()
     since = time.monotonic()
     waiter.put('first')
     waiter.put('second')
@@ -27,10 +27,10 @@ def test_the_newest_scan_wins():
 
 
 def test_cancel_ends_the_wait_promptly():
-    waiter = ScanWaiter()
+    waiter = NewestMessage()
     cancel = threading.Event()
     threading.Timer(0.1, cancel.set).start()
     t0 = time.monotonic()
-    with pytest.raises(Cancelled):
+    with pytest.raises(CanceledError):
         waiter.wait_after(time.monotonic(), 60.0, cancel.is_set)
     assert time.monotonic() - t0 < 1.0

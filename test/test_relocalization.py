@@ -17,9 +17,9 @@ from std_msgs.msg import String
 from conftest import aisles_with_a_box, assert_pose_near, symmetric_room
 from global_loc.core.localizer import Localizer
 from global_loc.core.map_io import save_map_yaml
+from global_loc.core.newest_message import NewestMessage
 from global_loc.core.outcome import Outcome
 from global_loc.core.pose_history import PoseHistory
-from global_loc.core.scan_waiter import ScanWaiter
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import (
     pose_from_msg,
@@ -200,14 +200,14 @@ def test_a_symmetric_room_stays_ambiguous_after_turning_and_publishes_nothing(tm
 
 
 class TurningRobot:
-    """The server's side of resolve_by_motion without a node: a real ScanWaiter of LaserScan
+    """The server's side of resolve_by_motion without a node: a real NewestMessage of LaserScan
     messages and a PoseHistory, fed at 10 Hz (simulated time = the stamps) by a pybullet
     robot that turns at whatever rate the last published twist asks."""
 
     def __init__(self, occupancy_map, start: Rigid2D, laser):
         self.sim = Simulator(occupancy_map, laser, seed=1)
         self.sim.place(start)
-        self.scans, self.odometry, self.twists, self.truths = ScanWaiter(), PoseHistory(), [], {}
+        self.scans, self.odometry, self.twists, self.truths = NewestMessage(), PoseHistory(), [], {}
         self.t, self.stop = 100.0, threading.Event()
         self.first = self.publish_scan()
         self.thread = threading.Thread(target=self.run, daemon=True)

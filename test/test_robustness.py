@@ -14,7 +14,7 @@ from global_loc.core.localizer import Localizer, LocalizerConfig
 from global_loc.core.map_io import MapError, from_occupancy_grid, load_map_yaml
 from global_loc.core.matchers import BranchAndBoundOptions, MatchOptions, MethodError, make_matcher, resolve_method
 from global_loc.core.matchers.features import surf_available
-from global_loc.core.outcome import Cancelled, Outcome
+from global_loc.core.outcome import CanceledError, Outcome
 from global_loc.core.scan import Scan, ScanError
 from global_loc.core.transform import Rigid2D
 from global_loc.sim.raycast import simulate_scan
@@ -119,7 +119,7 @@ def test_max_search_s_ends_any_search_as_incomplete():
 
 def test_a_cancel_does_not_wait_for_a_rotation_of_the_template_matcher():
     """On a large map one matchTemplate call takes about a second; the cancel is seen
-    while it still runs (its thread is alive when Cancelled reaches the caller)."""
+    while it still runs (its thread is alive when CanceledError reaches the caller)."""
     grid = np.zeros((3000, 3000), int)
     grid[::50, :] = 100
     grid[:, ::70] = 100
@@ -129,9 +129,9 @@ def test_a_cancel_does_not_wait_for_a_rotation_of_the_template_matcher():
     from global_loc.core.scan import scan_to_points
 
     def cancel(fraction, best):
-        raise Cancelled()
+        raise CanceledError()
 
-    with pytest.raises(Cancelled):
+    with pytest.raises(CanceledError):
         matcher.match(scan_to_points(scan), MatchOptions(), cancel)
     running = [t for t in threading.enumerate() if t.name == 'matchTemplate']
     assert running, 'the rotation had finished before the cancel was seen'

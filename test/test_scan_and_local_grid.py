@@ -76,14 +76,21 @@ def test_crop_remembers_offsets_so_the_laser_pixel_moves():
     assert crop.laser_px == (13.0 - 23, 13.0 - 8)
 
 
-def test_opening_joins_a_dotted_wall_into_a_line_and_zero_kernel_is_off():
+def test_closing_joins_a_dotted_wall_into_a_line_and_zero_kernel_is_off():
     # Returns every second cell along a wall, as a far wall gives at grazing angles.
     ys = np.arange(-1.0, 1.0, 0.2)
     pts = ScanPoints(np.stack([np.full_like(ys, 1.5), ys], axis=1), range_max=2.0, num_beams=len(ys))
-    raw = build_local_grid(pts, 0.1, opening_kernel=0)
-    joined = build_local_grid(pts, 0.1, opening_kernel=3)
+    raw = build_local_grid(pts, 0.1, closing_kernel=0)
+    joined = build_local_grid(pts, 0.1, closing_kernel=3)
     column = raw.image[:, int(raw.laser_px[0] + 15)]
     assert (column[column.nonzero()[0].min():column.nonzero()[0].max() + 1] == 0).any()   # gaps
     column = joined.image[:, int(joined.laser_px[0] + 15)]
     assert (column[column.nonzero()[0].min():column.nonzero()[0].max() + 1] == 255).all()  # a line
     assert close_obstacles(raw, 0).image is raw.image
+
+
+def test_the_cli_names_the_closing_by_what_it_does_and_keeps_the_thesiss_name():
+    from global_loc.cli import build_parser
+    for flag in ('--closing-kernel', '--opening-kernel'):     # the ROS parameter is opening_kernel
+        args = build_parser().parse_args(['localize', '--scans', 'scans.jsonl', flag, '5'])
+        assert args.closing_kernel == 5

@@ -5,7 +5,9 @@ and side 2 x range_max. Obstacles are 255 on 0 — the inverse of the thesis's b
 white drawings, which is the polarity matchTemplate and feature detectors want against
 `OccupancyMap.obstacle_image()`. Hence the thesis's *opening* of the black-on-white image
 (which grows black points and joins a wall's dotted returns into a line, its fig. 2.5)
-is here a morphological *closing* of the obstacle pixels: the same operation.
+is here a morphological *closing* of the obstacle pixels: the same operation, named here
+for what it does (`closing_kernel`; the ROS parameter and the CLI flag keep the thesis's
+name, `opening_kernel`).
 """
 from __future__ import annotations
 
@@ -76,9 +78,9 @@ def crop_to_obstacles(grid: LocalGrid, margin: int = 0) -> LocalGrid:
 
 
 def close_obstacles(grid: LocalGrid, kernel: int) -> LocalGrid:
-    """The thesis's opening (of obstacles drawn black on white) with a kernel x kernel
-    square; 0 or 1 leaves the grid unchanged. Too large a kernel joins nearby corners
-    (thesis fig. 2.6)."""
+    """A morphological closing of the obstacle pixels (the thesis's opening of obstacles drawn
+    black on white) with a kernel x kernel square; 0 or 1 leaves the grid unchanged. Too
+    large a kernel joins nearby corners (thesis fig. 2.6)."""
     if kernel <= 1:
         return grid
     k = cv2.getStructuringElement(cv2.MORPH_RECT, (kernel, kernel))
@@ -86,10 +88,10 @@ def close_obstacles(grid: LocalGrid, kernel: int) -> LocalGrid:
                      grid.laser_px, grid.crop_offset)
 
 
-def build_local_grid(points: ScanPoints, resolution: float, opening_kernel: int,
+def build_local_grid(points: ScanPoints, resolution: float, closing_kernel: int,
                      laser_yaw: float = 0.0, max_range: float = math.inf) -> LocalGrid:
-    """Scan points -> rasterized, cropped, morphologically opened local map (points up to max_range)."""
-    return close_obstacles(crop_to_obstacles(rasterize(points, resolution, laser_yaw, max_range)), opening_kernel)
+    """Scan points -> rasterized, cropped, morphologically closed local map (points up to max_range)."""
+    return close_obstacles(crop_to_obstacles(rasterize(points, resolution, laser_yaw, max_range)), closing_kernel)
 
 
 def soften(image: np.ndarray) -> np.ndarray:

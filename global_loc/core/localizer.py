@@ -28,7 +28,7 @@ class LocalizerConfig:
     """Every knob of the pipeline, documented once; ROS parameters and CLI flags fill it."""
     method: str = 'bnb'                    # matcher name, see matchers.method_names()
     angle_step_deg: float = 5.0            # Δα of the rotated-template matcher
-    opening_kernel: int = 3                # morphological opening of the local map, pixels (0 = off)
+    closing_kernel: int = 3                # morphological closing of the local map's obstacles, pixels (0 = off)
     # Fixed covariance of the thesis matchers (thesis §3.1); defaults are AMCL's initial_cov_{xx,yy,aa}.
     covariance_xy: float = 0.25            # m^2
     covariance_yaw: float = 0.0685         # rad^2 ((15 deg)^2)
@@ -93,7 +93,7 @@ class Localizer:
                  progress: Optional[ProgressFn] = None, base_T_laser: Optional[Rigid2D] = None,
                  region: Optional[SearchRegion] = None) -> LocalizationResult:
         """Localize one scan. Raises ScanError for an unusable scan, MethodError for an
-        unknown method, ValueError for a bad angle step and Cancelled if `progress` raises
+        unknown method, ValueError for a bad angle step and CanceledError if `progress` raises
         it; otherwise returns a result, successful or not. `base_T_laser` overrides the
         config's laser mounting; `region` (of the robot base) restricts the search."""
         t0 = time.perf_counter()
@@ -115,7 +115,7 @@ class Localizer:
         widened = ''
         if bounded:    # a prior tighter than the search's resolution holds no pose it returns: widen it, said
             region, widened = region.widened_to(*matcher.search_resolution(points, step))
-        options = MatchOptions(angle_step_deg=step, opening_kernel=cfg.opening_kernel,
+        options = MatchOptions(angle_step_deg=step, closing_kernel=cfg.closing_kernel,
                                region=region.for_laser(base_T_laser) if bounded else None,
                                max_search_s=cfg.max_search_s)
         if not self._has_obstacles:

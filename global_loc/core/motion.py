@@ -192,7 +192,7 @@ class HypothesisFollower:
     def follow(self, observations: Iterable[Observation],
                on_step: Optional[Callable[['HypothesisFollower'], None]] = None) -> bool:
         """`observe` each observation until one settles or they end (an iterator may raise
-        Cancelled: it goes through), `on_step` after each; whether one settled. Then `finish`."""
+        CanceledError: it goes through), `on_step` after each; whether one settled. Then `finish`."""
         for obs in observations:
             settled = self.observe(obs)
             if on_step is not None:

@@ -1,7 +1,8 @@
-"""ScanWaiter: the newest scan with its arrival time, and a wait for one that arrives
-after a given moment. The server's scan callback puts; a goal's worker thread waits.
-No ROS here, so the waiting rule (never a stale scan, cancel seen within `poll_s`) is
-tested without processes.
+"""NewestMessage: the newest message of a stream (scans, odometry) with its arrival time,
+and a wait for one that arrives after a given moment. A subscription callback puts; a
+goal's worker thread waits ("the first scan after the request") or asks whether any has
+come (odometry). No ROS here, so the waiting rule (never a stale message, cancel seen
+within `poll_s`) is tested without processes.
 """
 from __future__ import annotations
 
@@ -9,39 +10,39 @@ import threading
 import time
 from typing import Callable, Generic, Optional, TypeVar
 
-from .outcome import Cancelled
+from .outcome import CanceledError
 
 T = TypeVar('T')
 
 
-class ScanWaiter(Generic[T]):
+class NewestMessage(Generic[T]):
     def __init__(self, clock: Callable[[], float] = time.monotonic):
         self._clock = clock
         self._cond = threading.Condition()
-        self._latest: Optional[tuple[float, T]] = None    # (arrival time, scan)
+        self._latest: Optional[tuple[float, T]] = None    # (arrival time, message)
 
-    def put(self, scan: T) -> None:
-        """Keep `scan` as the newest one, arrived now."""
+    def put(self, message: T) -> None:
+        """Keep `message` as the newest one, arrived now."""
         with self._cond:
-            self._latest = (self._clock(), scan)
+            self._latest = (self._clock(), message)
             self._cond.notify_all()
 
     def latest(self) -> Optional[T]:
-        """The newest scan, however old (None before the first)."""
+        """The newest message, however old (None before the first)."""
         with self._cond:
             return None if self._latest is None else self._latest[1]
 
     def wait_after(self, since: float, timeout: float, cancelled: Callable[[], bool] = lambda: False,
                    poll_s: float = 0.05) -> Optional[T]:
-        """The first scan that arrived at or after `since` (a clock reading); None when
-        none has by since + timeout; raises Cancelled as soon as `cancelled()` says so."""
+        """The first message that arrived at or after `since` (a clock reading); None when
+        none has by since + timeout; raises CanceledError as soon as `cancelled()` says so."""
         deadline = since + timeout
         with self._cond:
             while True:
                 if self._latest is not None and self._latest[0] >= since:
                     return self._latest[1]
                 if cancelled():
-                    raise Cancelled()
+                    raise CanceledError()
                 remaining = deadline - self._clock()
                 if remaining <= 0:
                     return None

@@ -32,7 +32,7 @@ class Outcome(enum.IntEnum):
         return self.name.lower()
 
 
-class Cancelled(Exception):
+class CanceledError(Exception):
     """Raised from a progress callback (or a wait) to abandon a localization."""
 
 

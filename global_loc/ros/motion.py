@@ -14,9 +14,9 @@ from geometry_msgs.msg import Twist, Vector3
 
 from ..core.localizer import LocalizationResult
 from ..core.motion import HypothesisFollower, Observation
+from ..core.newest_message import NewestMessage
 from ..core.pose_history import PoseHistory
 from ..core.scan import ScanError, scan_to_points
-from ..core.scan_waiter import ScanWaiter
 from ..core.transform import Rigid2D
 from .convert import scan_from_msg, stamp_seconds
 
@@ -24,7 +24,7 @@ ODOMETRY_GRACE_S = 2.0     # a moment for a late first odometry message
 
 
 def resolve_by_motion(result: LocalizationResult, first_msg, base_T_laser: Rigid2D, duration_s: float,
-                      rotate_in_place: bool, *, localizer, scans: ScanWaiter, odometry: PoseHistory,
+                      rotate_in_place: bool, *, localizer, scans: NewestMessage, odometry: PoseHistory,
                       odometry_arrived: Callable[[float], bool], publish_cmd_vel: Callable[[Twist], None],
                       rotate_speed: float, odom_topic: str, cancelled: Callable[[], bool], feedback,
                       log: Callable[[str], None]) -> tuple[LocalizationResult, object]:
@@ -33,7 +33,7 @@ def resolve_by_motion(result: LocalizationResult, first_msg, base_T_laser: Rigid
     the last scan message used - the poses are the robot's at its stamp).
 
     `odometry_arrived(timeout_s)`: whether any odometry has come, waiting up to timeout_s
-    (raises Cancelled on cancel); `publish_cmd_vel(twist)`: the cmd_vel publisher's
+    (raises CanceledError on cancel); `publish_cmd_vel(twist)`: the cmd_vel publisher's
     publish; `feedback(progress, stage, best_score, hypotheses)` as the action's."""
     first_stamp = stamp_seconds(first_msg.header.stamp)
     start_odometry = odometry.at(first_stamp) if odometry_arrived(ODOMETRY_GRACE_S) else None
@@ -50,7 +50,7 @@ def resolve_by_motion(result: LocalizationResult, first_msg, base_T_laser: Rigid
         while since < deadline:
             turning = rotate_in_place and follower.turned < 2 * math.pi      # one turn, by the odometry
             publish_cmd_vel(Twist(angular=Vector3(z=float(rotate_speed) if turning else 0.0)))
-            msg = scans.wait_after(since, max(0.0, deadline - since), cancelled)   # Cancelled goes through
+            msg = scans.wait_after(since, max(0.0, deadline - since), cancelled)   # CanceledError goes through
             if msg is None:
                 return
             since = time.monotonic()

@@ -97,7 +97,7 @@ SPECS = [
     Spec('method', _L.method, f'default matcher: {", ".join(method_names())}', live=True),
     Spec('angle_step_deg', _L.angle_step_deg, 'rotation step of the template matcher, degrees', limits.ANGLE_STEP_DEG,
          live=True),
-    Spec('opening_kernel', _L.opening_kernel, 'opening kernel of the local map, pixels (0 = off)', (0, 31),
+    Spec('opening_kernel', _L.closing_kernel, 'opening kernel of the local map, pixels (0 = off)', (0, 31),
          live=True),
     Spec('covariance_xy', _L.covariance_xy, 'x and y variance published with the thesis matchers, m^2',
          (1e-6, 100.0), live=True),
@@ -153,7 +153,7 @@ def build_config(values: dict, mounts: dict | None = None) -> ServerConfig:
     except ValueError as e:
         raise ConfigError(f'parameter {"method" if "method" in str(e) else "bnb.*"}: {e}') from None
     localizer = LocalizerConfig(method=v['method'], angle_step_deg=v['angle_step_deg'],
-                                opening_kernel=v['opening_kernel'], covariance_xy=v['covariance_xy'],
+                                closing_kernel=v['opening_kernel'], covariance_xy=v['covariance_xy'],
                                 covariance_yaw=v['covariance_yaw'],
                                 base_T_laser=Rigid2D(v['laser_x'], v['laser_y'], v['laser_yaw']),
                                 max_search_s=v['max_search_s'], bnb=bnb)

@@ -53,11 +53,11 @@ def markers_msg(result: LocalizationResult, frame_id: str, stamp) -> MarkerArray
     return out
 
 
-def local_map_msg(points: ScanPoints, resolution: float, opening_kernel: int, map_T_laser: Rigid2D,
+def local_map_msg(points: ScanPoints, resolution: float, closing_kernel: int, map_T_laser: Rigid2D,
                   frame_id: str, stamp, max_range: float = math.inf) -> OccupancyGrid:
-    """The scan's local map (rasterized, cropped, opened: core.local_grid) placed with the
+    """The scan's local map (rasterized, cropped, closed: core.local_grid) placed with the
     laser at `map_T_laser`; obstacle cells 100, the rest unknown."""
-    local = build_local_grid(points, resolution, opening_kernel, max_range=max_range)
+    local = build_local_grid(points, resolution, closing_kernel, max_range=max_range)
     map_T_grid = map_T_laser * local.grid_T_laser().inverse()
     msg = OccupancyGrid()
     msg.header.frame_id, msg.header.stamp = frame_id, stamp

@@ -22,7 +22,7 @@ from typing import Callable, Optional
 
 from ..core.cloud import CloudError
 from ..core.mount3d import Mount3D, Mount3DError
-from ..core.outcome import Cancelled
+from ..core.outcome import CanceledError
 from ..core.scan import ScanError
 from ..core.view import SensorReading, View, ViewConfig, ViewError, merge_view, reading_from_scan
 from .cloud import cloud_from_msg
@@ -161,7 +161,7 @@ class SensorInputs:
         """Once the first message after `since` has arrived, and every sensor's or
         `window` s have followed it: topic -> (arrival, msg) of every sensor heard from
         (older ones too: `view` tells them apart). None when nothing arrived by since +
-        timeout; Cancelled when `cancelled()` says so."""
+        timeout; CanceledError when `cancelled()` says so."""
         with self.cond:
             while True:
                 fresh = [a for a, _ in self.newest.values() if a >= since]
@@ -169,7 +169,7 @@ class SensorInputs:
                 if fresh and (len(fresh) == len(self.specs) or now >= min(fresh) + window):
                     return dict(self.newest)
                 if cancelled():
-                    raise Cancelled()
+                    raise CanceledError()
                 end = min(fresh) + window if fresh else since + timeout
                 if not fresh and now >= end:
                     return None
@@ -236,7 +236,7 @@ def make_view(inputs: SensorInputs, newest: dict, since: float, mount: Callable,
 
 def subscribe(node, specs: tuple, inputs: SensorInputs, primary_scans, guarded, group) -> list:
     """A subscription per sensor (sensor-data QoS) putting into `inputs`; the primary
-    laser's scans also go to `primary_scans` (a ScanWaiter: the watch, resolve-by-motion)."""
+    laser's scans also go to `primary_scans` (a NewestMessage: the watch, resolve-by-motion)."""
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import LaserScan, PointCloud2
 

@@ -41,10 +41,10 @@ from ..core.map_io import load_map_yaml
 from ..core.map_slot import MapSlot
 from ..core.motion import pose_fitter
 from ..core.mount import LaserMount, MountError
+from ..core.newest_message import NewestMessage
 from ..core.outcome import Outcome
 from ..core.pose_history import PoseHistory
 from ..core.scan import ScanError, scan_to_points
-from ..core.scan_waiter import ScanWaiter
 from .convert import map_from_msg, pose_from_msg, scan_from_msg, stamp_seconds
 from .motion import resolve_by_motion
 from .node_main import exit_process, run_node
@@ -69,8 +69,8 @@ class GlobalLocServer(LifecycleNode):
         self.group = ReentrantCallbackGroup()
         self.maps: MapSlot[Localizer] = MapSlot(self.build_localizer, self.on_map_change)
         self.sensors = SensorInputs()                          # every sensor's newest message (the view)
-        self.scans: ScanWaiter[LaserScan] = ScanWaiter()       # the primary laser's (watch, resolve-by-motion)
-        self.odom: ScanWaiter[Odometry] = ScanWaiter()        # the newest odometry (has any come?)
+        self.scans: NewestMessage[LaserScan] = NewestMessage()       # the primary laser's (watch, resolve-by-motion)
+        self.odom: NewestMessage[Odometry] = NewestMessage()        # the newest odometry (has any come?)
         self.odom_history = PoseHistory()                      # odometry by stamp
         self.errors: dict[str, int] = {}                       # callback name -> exceptions caught
         self.pubs: dict = {}

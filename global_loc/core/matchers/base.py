@@ -5,7 +5,7 @@ and aligns one scan's points against that map. `match` returns a `Match`: the di
 hypotheses (laser poses in the map frame with scores, best first, higher is better; the
 matcher decides distinctness, once, in metres: `distinct`), why the search stopped short
 if it did, and its statistics. It reports progress through `progress(fraction,
-best_score)`, which may raise `Cancelled` to stop it early. `judge` turns exactly those
+best_score)`, which may raise `CanceledError` to stop it early. `judge` turns exactly those
 hypotheses into a Verdict; it reads nothing else, so one matcher serves any number of
 threads and callers, and the caller only presents what both returned.
 """
@@ -88,7 +88,7 @@ class Verdict:
 class MatchOptions:
     """Per-request knobs that every matcher reads (those it does not need it ignores)."""
     angle_step_deg: float = 5.0
-    opening_kernel: int = 3
+    closing_kernel: int = 3                # core.local_grid.close_obstacles
     peaks_per_angle: int = 3
     # Where the laser may be; a matcher may use it to search less (the Localizer drops
     # candidates outside the robot's region in any case).

@@ -73,7 +73,7 @@ class FeatureMatcher(Matcher):
 
     def match(self, points, options, progress=None):
         self.check_local_map_budget(points)
-        local = build_local_grid(points, self.map.resolution, options.opening_kernel,
+        local = build_local_grid(points, self.map.resolution, options.closing_kernel,
                                  max_range=self.map.diagonal_m)
         kps, desc = self.detector.detectAndCompute(soften(local.image), None)
         if progress:

@@ -41,7 +41,7 @@ class RotatedTemplateMatcher(Matcher):
 
     def match(self, points, options, progress=None):
         self.check_local_map_budget(points)
-        local = build_local_grid(points, self.map.resolution, options.opening_kernel,
+        local = build_local_grid(points, self.map.resolution, options.closing_kernel,
                                  max_range=self.map.diagonal_m)
         self.check_rotation_budget(local.image.shape, options)
         angles = self.angles(options)
@@ -127,7 +127,7 @@ class RotatedTemplateMatcher(Matcher):
 
 def run_checked(work, check, poll_s: float = 0.02):
     """work() in a thread (OpenCV releases the GIL), calling check() every poll_s
-    meanwhile: check may raise (Cancelled) and the caller returns at once, leaving the
+    meanwhile: check may raise (CanceledError) and the caller returns at once, leaving the
     thread to finish alone. One rotation's matchTemplate on a 4000^2 map takes over a
     second; a cancel must not wait for it. Not a daemon thread: the interpreter's exit
     waits for it (C++ code still running at exit aborts the process). Without a check,

@@ -105,7 +105,7 @@ class ThreadedSearch:
                     if heaps[j][2][0] > 1:
                         heaps[k], heaps[j] = split_heap(*heaps[j])
                         done[k] = done[j] = False
-            if progress:   # the server's progress callback raises Cancelled on a cancel request
+            if progress:   # the server's progress callback raises CanceledError on a cancel request
                 progress(min(0.95, expanded / max_nodes), shared_best[0] / (255.0 * tables.du.shape[1]))
         leaves = np.concatenate(found) if found else np.empty((0, 4), np.int64)
         leaves = leaves[leaves[:, 3] >= space.keep * shared_best[0]]
