@@ -5,12 +5,17 @@ import subprocess
 import sys
 
 
+def run_bench(out, *args) -> list[dict]:
+    """`python -m global_loc.bench --quick ARGS --out OUT`: its rows (it must succeed)."""
+    done = subprocess.run([sys.executable, '-m', 'global_loc.bench', '--quick', *args, '--out', str(out)],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return [json.loads(line) for line in (out / 'rows.jsonl').read_text().splitlines()]
+
+
 def test_bench_writes_rows_report_and_plots(tmp_path):
-    out = subprocess.run([sys.executable, '-m', 'global_loc.bench', '--quick', '--suites', 'cut', '--poses', '5',
-                          '--methods', 'template_ccoeff,features_orb', '--jobs', '2', '--out', str(tmp_path)],
-                         capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr[-3000:]
-    rows = [json.loads(line) for line in (tmp_path / 'rows.jsonl').read_text().splitlines()]
+    rows = run_bench(tmp_path, '--suites', 'cut', '--poses', '5', '--methods', 'template_ccoeff,features_orb',
+                     '--jobs', '2')
     # 1 pose x 3 radii x 2 maps; template at Δα 5 and 15, ORB once (Δα does not apply to it)
     assert {r['method'] for r in rows} == {'template_ccoeff', 'features_orb'}
     assert all({'ok', 'ok_loose', 'time_s', 'success'} <= set(r) for r in rows)
@@ -66,11 +71,7 @@ def test_the_report_is_written_again_from_its_rows_without_running_anything(tmp_
 
 
 def test_changed_world_suite_reports_each_level_with_a_plot(tmp_path):
-    out = subprocess.run([sys.executable, '-m', 'global_loc.bench', '--quick', '--suites', 'changed', '--poses', '1',
-                          '--methods', 'bnb', '--jobs', '1', '--out', str(tmp_path)],
-                         capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr[-3000:]
-    rows = [json.loads(line) for line in (tmp_path / 'rows.jsonl').read_text().splitlines()]
+    rows = run_bench(tmp_path, '--suites', 'changed', '--poses', '1', '--methods', 'bnb', '--jobs', '1')
     assert sorted({r['change'] for r in rows}) == [0, 1, 2, 3] and all('expansions' in r for r in rows)
     report = (tmp_path / 'REPORT.md').read_text()
     assert '## Changed world' in report and '| bnb | 3 |' in report

@@ -3,8 +3,6 @@ people near the robot, wall pieces removed: sim/changes.py) at levels 0 (the map
 to 3, localized against the unchanged map."""
 from __future__ import annotations
 
-import os
-
 import matplotlib
 import numpy as np
 
@@ -15,7 +13,7 @@ from ..core.map_io import OccupancyMap  # noqa: E402
 from ..sim.changes import LEVELS, changed_world  # noqa: E402
 from ..sim.raycast import sample_free_poses, simulate_scan  # noqa: E402
 from .suites import Trial  # noqa: E402
-from .tables import group, pct, secs, stats  # noqa: E402
+from .tables import group, pct, save_figure, secs, stats  # noqa: E402
 
 CHANGE_LEVELS = (0, *sorted(LEVELS))
 # 270 deg / 20 m, 0.5 deg beams, 1 cm noise, 1% dropouts (the sim suite's laser)
@@ -75,6 +73,4 @@ def plot_changed(rows: list[dict], out: str) -> None:
         ax.set_xlabel('level of change')
         ax.set_xticks(CHANGE_LEVELS)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(os.path.join(out, 'changed.png'), dpi=90)
-    plt.close(fig)
+    save_figure(fig, out, 'changed.png')

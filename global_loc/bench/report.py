@@ -17,7 +17,7 @@ from .changed import changed_section  # noqa: E402
 from .follow import follow_section  # noqa: E402
 from .sections import prior_section, scaling_section, soak_section  # noqa: E402
 from .summary import summary_section  # noqa: E402
-from .tables import BASELINE, group, pct, secs, stats  # noqa: E402
+from .tables import BASELINE, group, pct, save_figure, secs, stats  # noqa: E402
 
 BENCHMARKS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
                           'benchmarks')
@@ -240,18 +240,14 @@ def plot_sim(rows, methods, out):
         bars(ax, vary(key), methods, ok, title, 'success (0.2 m / 5°)')
         ax.set_ylim(0, 1)
     axes[0, 0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(os.path.join(out, 'sim_factors.png'), dpi=100)
-    plt.close(fig)
+    save_figure(fig, out, 'sim_factors.png', dpi=100)
     fig, ax = plt.subplots(figsize=(10, 4))
     keep = [r for r in rows if all(r[k] == v for k, v in base.items())]
     bars(ax, dict(sorted(group(keep, lambda r: r['map']).items())), methods,
          lambda rs: stats(rs)['median'] if rs else 0, 'median time per localization, 270° / 20 m / Δα 5°', 'seconds')
     ax.set_yscale('log')
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(os.path.join(out, 'sim_time.png'), dpi=100)
-    plt.close(fig)
+    save_figure(fig, out, 'sim_time.png', dpi=100)
 
 
 def plot_cut(rows, methods, out):
@@ -269,9 +265,7 @@ def plot_cut(rows, methods, out):
     ax.set_yscale('log')
     ax.legend(fontsize=7)
     ax.set_title('time against local map size (thesis figs. 4.7/4.8)', fontsize=9)
-    fig.tight_layout()
-    fig.savefig(os.path.join(out, 'cut_time_vs_size.png'), dpi=100)
-    plt.close(fig)
+    save_figure(fig, out, 'cut_time_vs_size.png', dpi=100)
 
 
 def plot_carmen(rows, methods, out):
@@ -280,9 +274,7 @@ def plot_carmen(rows, methods, out):
          lambda rs: stats(rs)['ok'] if rs else 0, 'real logs, held-out folds', 'success (0.2 m / 5°)')
     ax.set_ylim(0, 1)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(os.path.join(out, 'carmen.png'), dpi=100)
-    plt.close(fig)
+    save_figure(fig, out, 'carmen.png', dpi=100)
 
 
 def failure_pictures(rows, trials, maps, out, count=2) -> list[str]:

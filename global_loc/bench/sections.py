@@ -1,8 +1,6 @@
 """Report sections of the search-prior, soak and scaling suites."""
 from __future__ import annotations
 
-import os
-
 import matplotlib
 
 matplotlib.use('Agg')
@@ -10,7 +8,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .soak import WARM_UP_GOALS  # noqa: E402
-from .tables import BASELINE, group, pct, secs, stats  # noqa: E402
+from .tables import BASELINE, group, pct, save_figure, secs, stats  # noqa: E402
 
 
 def prior_section(rows, out) -> list[str]:
@@ -119,6 +117,4 @@ def plot_scaling(pre, loc, out):
         ax.set_xlabel('free area [m²]')
         ax.set_title(title)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(os.path.join(out, 'scaling.png'), dpi=90)
-    plt.close(fig)
+    save_figure(fig, out, 'scaling.png')

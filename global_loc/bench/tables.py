@@ -3,6 +3,7 @@ number formats of the report's tables."""
 from __future__ import annotations
 
 import math
+import os
 from collections import defaultdict
 
 import numpy as np
@@ -36,3 +37,11 @@ def pct(v):
 
 def secs(v):
     return '–' if not math.isfinite(v) else (f'{v:.3f}' if v < 1 else f'{v:.2f}')
+
+
+def save_figure(fig, out: str, name: str, dpi: int = 90) -> None:
+    """Lay out, write `out`/`name` and free the figure (pyplot keeps every open one)."""
+    import matplotlib.pyplot as plt
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, name), dpi=dpi)
+    plt.close(fig)
