@@ -89,6 +89,21 @@ def node_bounds(planes, tables, tu, tv, ta, h):
 
 
 @njit(cache=True, nogil=True, inline='always')
+def child_node(free, space, u, v, a, h, c):
+    """Child c (0..7: the 4 quarter blocks x the 2 halves of the angles) of node (u, v, a,
+    h): (u, v, a) and whether it is searched at all - inside the map and the angles, on a
+    block holding a free cell, holding a pose of the search prior."""
+    half = 1 << (h - 1)
+    cu = u + (c & 1) * half
+    cv = v + ((c >> 1) & 1) * half
+    ca = a + ((c >> 2) & 1) * half
+    searched = (cu < space.map_w and cv < space.map_h and ca < space.n_angles
+                and free.flags[free.offsets[h - 1] + (cv >> (h - 1)) * free.width[h - 1] + (cu >> (h - 1))] != 0
+                and in_region(space, cu, cv, ca, h - 1))
+    return cu, cv, ca, searched
+
+
+@njit(cache=True, nogil=True, inline='always')
 def in_region(space, u, v, a, h):
     """Whether node (u, v, a, h) holds a pose of the search prior."""
     size = 1 << h
@@ -243,16 +258,9 @@ def search_step(planes, tables, free, space, heap, shared_best, budget, per_leve
         point_values(planes, tables, u, v, a, h, parent)
         for i in range(n_points - 1, -1, -1):
             parent_rest[i] = parent_rest[i + 1] + parent[i]
-        half = 1 << (h - 1)
-        for c in range(8):     # the 4 quarter blocks x the 2 halves of the angles
-            cu = u + (c & 1) * half
-            cv = v + ((c >> 1) & 1) * half
-            ca = a + ((c >> 2) & 1) * half
-            if cu >= space.map_w or cv >= space.map_h or ca >= space.n_angles:
-                continue
-            if free.flags[free.offsets[h - 1] + (cv >> (h - 1)) * free.width[h - 1] + (cu >> (h - 1))] == 0:
-                continue
-            if not in_region(space, cu, cv, ca, h - 1):
+        for c in range(8):
+            cu, cv, ca, searched = child_node(free, space, u, v, a, h, c)
+            if not searched:
                 continue
             cb = child_bound(planes, tables, cu, cv, ca, h - 1, parent, parent_rest, int(math.ceil(keep * best)))
             if h == 1:      # a leaf: its exact score
@@ -284,17 +292,10 @@ def dive(planes, tables, free, space, u, v, a, h):
     first incumbent, so that it holds a leaf before its first slice ends."""
     terms = np.empty(tables.du.shape[1], np.int64)
     while h > 0:
-        half = 1 << (h - 1)
         best_bound, bu, bv, ba = np.int64(-1), u, v, a
         for c in range(8):
-            cu = u + (c & 1) * half
-            cv = v + ((c >> 1) & 1) * half
-            ca = a + ((c >> 2) & 1) * half
-            if cu >= space.map_w or cv >= space.map_h or ca >= space.n_angles:
-                continue
-            if free.flags[free.offsets[h - 1] + (cv >> (h - 1)) * free.width[h - 1] + (cu >> (h - 1))] == 0:
-                continue
-            if not in_region(space, cu, cv, ca, h - 1):
+            cu, cv, ca, searched = child_node(free, space, u, v, a, h, c)
+            if not searched:
                 continue
             point_values(planes, tables, cu, cv, ca, h - 1, terms)
             bound = terms.sum()
