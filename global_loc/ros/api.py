@@ -89,7 +89,8 @@ class LocalizeResult:
     covariance: Optional[np.ndarray]    # 3x3 (x, y, yaw), with `pose`
     score: float
     confidence: float
-    hypotheses: list               # [(Rigid2D, score)], best first; hypotheses[0][0] is `pose`
+    hypotheses: list               # [(Rigid2D, score)], best first; hypotheses[0][0] is `pose` (scores: see
+                                   # the action's hypothesis_scores - mean fits after resolving by motion)
     scan_stamp: float              # the localized scan's stamp, s (0 when no scan was used)
     scan_age_s: float
     elapsed_s: float
