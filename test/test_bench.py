@@ -4,6 +4,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 
 def run_bench(out, *args) -> list[dict]:
     """`python -m global_loc.bench --quick ARGS --out OUT`: its rows (it must succeed)."""
@@ -102,7 +104,6 @@ def test_isolated_env_picks_a_dds_domain_no_process_here_uses():
     mix the two (seen: the fault suite's goals answered `not_active` by another run's server)."""
     import socket
 
-    import pytest
     processes = pytest.importorskip('global_loc.ros.processes')
     free = max(d for d in processes.DOMAINS if d not in processes.domains_in_use())
     held = []
@@ -119,3 +120,30 @@ def test_isolated_env_picks_a_dds_domain_no_process_here_uses():
     finally:
         for s in held:
             s.close()
+
+
+def fault_row(scenario, **figures):
+    row = {'suite': 'faults', 'scenario': scenario, 'goals': 10, 'answered': 10, 'poses': 8, 'wrong_poses': 0,
+           'unchecked_poses': 0, 'wrong_results': 0, 'hangs': 0, 'tracebacks': 0, 'recovery_s': 1.0, 'error': None}
+    return {**row, **figures}
+
+
+def test_the_fault_table_is_built_from_the_runs_rows_per_scenario_and_in_all():
+    from global_loc.bench.sections import faults_section
+    rows = [fault_row('laser_late', recovery_s=2.0), fault_row('laser_late', recovery_s=4.0, goals=12, answered=11,
+                                                               hangs=1),
+            fault_row('map_republished', wrong_poses=1, recovery_s=None)]
+    table = [line for line in faults_section(rows) if line.startswith('| ')]
+    assert table[1] == '| laser_late | 2 | 21 of 22 | 16 | 0 | 0 | 1 | 2 of 2 | 3.00 / 4.00 | 0 | 0 |'
+    assert table[2] == '| map_republished | 1 | 10 of 10 | 8 | 1 | 0 | 0 | 0 of 1 | – / – | 0 | 0 |'
+    assert table[3] == '| **all** | 3 | 31 of 32 | 24 | **1** | 0 | **1** | 2 of 3 | 3.00 / 4.00 | 0 | 0 |'
+
+
+@pytest.mark.ros
+def test_a_fault_scenario_runs_against_real_processes_and_writes_its_table(tmp_path):
+    """One run of laser_late (the simulator started 2-6 s after the server, goals all along)."""
+    rows = run_bench(tmp_path, '--suites', 'faults', '--fault-scenarios', 'laser_late')
+    assert [r['scenario'] for r in rows] == ['laser_late'] and rows[0]['error'] is None, rows
+    assert rows[0]['answered'] == rows[0]['goals'] > 0 and rows[0]['wrong_poses'] == 0 and rows[0]['hangs'] == 0
+    assert rows[0]['recovery_s'] is not None, rows[0]
+    assert '| laser_late | 1 |' in (tmp_path / 'REPORT.md').read_text()

@@ -22,6 +22,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .changed import changed_trials
+from .faults import SCENARIOS, fault_rows
 from .follow import follow_rows
 from .relocalization import relocalization_rows
 from .report import BASELINE, write_report
@@ -41,7 +42,7 @@ from .suites import (
 from .worker import run_job, worker_init
 
 # Suites whose rows are not one localization each: the report reads them apart.
-NOTE_SUITES = ('relocalization', 'scaling', 'follow', 'soak')
+NOTE_SUITES = ('relocalization', 'scaling', 'follow', 'soak', 'faults')
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
@@ -74,9 +75,11 @@ def parse_args(argv):
     parser.add_argument('--suites', default='cut,sim,carmen,prior,relocalization,scaling',
                         help='comma-separated: cut, sim, carmen, prior, relocalization, scaling; and changed (a '
                              'world changed since its map, three levels), soak (the real server and simulator '
-                             'under faults) and follow (resolution by motion on the real logs), not in the default '
-                             'set')
+                             'under faults), faults (runtime changes: bench/faults.py) and follow (resolution by '
+                             'motion on the real logs), not in the default set')
     parser.add_argument('--soak-goals', type=int, default=0, help='goals of the soak suite (default 1000, quick 40)')
+    parser.add_argument('--fault-runs', type=int, default=0, help='runs of each fault scenario (default 2, quick 1)')
+    parser.add_argument('--fault-scenarios', default=','.join(SCENARIOS), help='comma-separated fault scenarios')
     parser.add_argument('--methods', default=','.join(METHODS))
     parser.add_argument('--jobs', type=int, default=os.cpu_count() or 1, help='worker processes')
     parser.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'), help='shared/data folder')
@@ -158,6 +161,10 @@ def run_other_suites(args, suites, methods, maps, poses, threads, carmen, carmen
         print('soak suite (server + simulator processes, faults) ...', file=sys.stderr)
         notes['soak'] = soak_rows(args.soak_goals or (40 if args.quick else 1000), args.seed,
                                   os.path.join(out, 'soak_logs'))
+    if 'faults' in suites:
+        print('fault suite (runtime changes against server + simulator processes) ...', file=sys.stderr)
+        notes['faults'] = fault_rows(args.fault_runs or (1 if args.quick else 2), args.seed,
+                                     os.path.join(out, 'fault_logs'), args.fault_scenarios.split(','))
 
 
 def notes_from_rows(all_rows: list[dict]) -> tuple[list[dict], dict]:

@@ -15,7 +15,7 @@ from ..core.transform import Rigid2D  # noqa: E402
 from ..plot import plot_localization  # noqa: E402
 from .changed import changed_section  # noqa: E402
 from .follow import follow_section  # noqa: E402
-from .sections import prior_section, scaling_section, soak_section  # noqa: E402
+from .sections import faults_section, prior_section, scaling_section, soak_section  # noqa: E402
 from .summary import summary_section  # noqa: E402
 from .tables import BASELINE, group, pct, save_figure, secs, stats  # noqa: E402
 
@@ -159,6 +159,8 @@ def write_report(rows, meta, out, maps, trials) -> None:
         md += follow_section(meta['follow'])
     if meta.get('soak'):
         md += soak_section(meta['soak'])
+    if meta.get('faults'):
+        md += faults_section(meta['faults'])
     if meta.get('scaling'):
         md += scaling_section(meta['scaling'], rows, out)
     md += failure_pictures(rows, trials, maps, out)

@@ -65,6 +65,7 @@ class Harness:
         self.client = ActionClient(self.node, Localize, 'localize')
         self.truth, self.truths = None, deque(maxlen=4000)      # (stamp ns, pose), newest last
         self.published = []     # every /initialpose: (monotonic time, right at its stamp: True/False/None)
+        self.wrong = []         # the wrong ones: pose, truth, stamp
         self.node.create_subscription(PoseStamped, '/sim/true_pose', self.on_truth, reliable(10, latched=True))
         self.node.create_subscription(PoseWithCovarianceStamped, '/initialpose', self.on_initialpose, reliable())
         self.set_pose = self.node.create_publisher(PoseStamped, '/sim/set_pose', 10)
@@ -98,7 +99,12 @@ class Harness:
         return None if truth is None else pose_correct(pose, truth)
 
     def on_initialpose(self, msg):
-        self.published.append((time.monotonic(), self.right_at(self.pose_from_msg(msg.pose.pose), msg.header.stamp)))
+        pose = self.pose_from_msg(msg.pose.pose)
+        ok = self.right_at(pose, msg.header.stamp)
+        self.published.append((time.monotonic(), ok))
+        if ok is False:          # what the report needs to find it in the server's log
+            self.wrong.append({'pose': pose.as_tuple(), 'truth': self.truth_at(msg.header.stamp).as_tuple(),
+                               'stamp_ns': stamp_ns(msg.header.stamp), 'received': time.monotonic()})
 
     @property
     def initialposes(self) -> int:

@@ -1,4 +1,4 @@
-"""Report sections of the search-prior, soak and scaling suites."""
+"""Report sections of the search-prior, soak, fault and scaling suites."""
 from __future__ import annotations
 
 import matplotlib
@@ -60,6 +60,48 @@ def soak_section(s: dict) -> list[str]:
             f'| SIGTERM mid-goal + restart: n / goal answered / slowest exit [s] / exit codes | {s["restarts"]} / '
             f'{s["restart_answered"]} / {f(s["exit_max_s"])} / {s["exit_codes"]} |',
             f'| crashes (server or simulator) | {s["crashes"]} |', '']
+
+
+def faults_summary(rows: list[dict]) -> list[dict]:
+    """Per scenario, in the order of the rows: the figures of the fault suite's table."""
+    out = []
+    for name in dict.fromkeys(r['scenario'] for r in rows):
+        rr = [r for r in rows if r['scenario'] == name]
+        rec = [r['recovery_s'] for r in rr if r['recovery_s'] is not None]
+        out.append({'scenario': name, 'runs': len(rr), **{k: sum(r[k] for r in rr) for k in (
+            'goals', 'answered', 'poses', 'wrong_poses', 'unchecked_poses', 'wrong_results', 'hangs', 'tracebacks')},
+            'recovered': len(rec), 'recovery_median_s': float(np.median(rec)) if rec else None,
+            'recovery_max_s': max(rec) if rec else None, 'errors': sum(r.get('error') is not None for r in rr)})
+    return out
+
+
+def faults_section(rows: list[dict]) -> list[str]:
+    """The fault suite's table (bench/faults.py says what each scenario does)."""
+    def s_(v):
+        return '–' if v is None else f'{v:.2f}'
+    lines = ['## Runtime changes (fault suite: real server and simulator processes)', '',
+             'Each scenario scripted against `ros2 run global_loc server` and the simulator node (bench/faults.py); '
+             'goals sent one after another during the fault. "wrong": an /initialpose farther than 0.2 m / 5° '
+             '(core.transform.pose_correct) from /sim/true_pose at the pose\'s stamp (the scan\'s); "wrong results": '
+             'goals answered `localized` with such a pose. "hangs": a goal unanswered 20 s after it was sent, a '
+             'service call unanswered in 15 s, a process not ended 10 s after its signal. "recovery": from the end '
+             'of the fault (the last thing the scenario did) to the next right localization (a goal, a published '
+             'pose, or the stand-in localizer taking one).', '',
+             '| scenario | runs | goals answered | poses published | wrong poses | wrong results | hangs '
+             '| recovered | recovery median / max [s] | tracebacks in logs | run errors |',
+             '|---|---|---|---|---|---|---|---|---|---|---|']
+    for s in faults_summary(rows):
+        lines.append(f'| {s["scenario"]} | {s["runs"]} | {s["answered"]} of {s["goals"]} | {s["poses"]} '
+                     f'| {s["wrong_poses"]} | {s["wrong_results"]} | {s["hangs"]} | {s["recovered"]} of {s["runs"]} '
+                     f'| {s_(s["recovery_median_s"])} / {s_(s["recovery_max_s"])} | {s["tracebacks"]} '
+                     f'| {s["errors"]} |')
+    total = faults_summary([{**r, 'scenario': 'all'} for r in rows])[0] if rows else None
+    if total:
+        lines.append(f'| **all** | {total["runs"]} | {total["answered"]} of {total["goals"]} | {total["poses"]} '
+                     f'| **{total["wrong_poses"]}** | {total["wrong_results"]} | **{total["hangs"]}** '
+                     f'| {total["recovered"]} of {total["runs"]} | {s_(total["recovery_median_s"])} / '
+                     f'{s_(total["recovery_max_s"])} | {total["tracebacks"]} | {total["errors"]} |')
+    return lines + ['']
 
 
 def scaling_section(rows, all_rows, out) -> list[str]:
