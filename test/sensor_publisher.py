@@ -3,13 +3,15 @@
 usage: python sensor_publisher.py MAP_YAML X Y YAW SENSORS_JSON
 SENSORS_JSON: a list of {"topic", "kind"} objects:
   kind "scan": a LaserScan ray-cast at the pose * its mounting ("mount": [x y z roll pitch
-    yaw], "fov", "beams", "frame", "stamp_offset_s": added to its stamps - a clock far apart);
+    yaw], "fov", "beams", "range_max", "frame", "stamp_offset_s": added to its stamps - a
+    clock far apart; "silent_if": a path - while that file exists it publishes nothing);
   kind "cloud_no_xyz": a PointCloud2 whose fields are named a/b/c;
   kind "cloud_bad_point_step": point_step 12 for data laid out 32 bytes a point;
   kind "cloud_bad_row_step": row_step one point longer than the data has.
 Everything at 5 Hz.
 """
 import json
+import os
 import sys
 
 import numpy as np
@@ -52,6 +54,8 @@ def main():
     def tick():
         now = node.get_clock().now()
         for s in sensors:
+            if 'silent_if' in s and os.path.exists(s['silent_if']):
+                continue
             if s['kind'] != 'scan':
                 pubs[s['topic']].publish(broken_cloud(s['kind'], now.to_msg()))
                 continue

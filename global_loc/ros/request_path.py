@@ -227,3 +227,9 @@ def trigger_message(result: Localize.Result, pose: Optional[Rigid2D]) -> str:
     if pose is not None:
         text += f'; {format_pose(pose)}, confidence {result.confidence:.2f}'
     return text
+
+
+def publish_feedback(goal_handle, progress, stage, best, hypotheses=0) -> None:
+    """The action's feedback (the `feedback` callback a goal's path reports through)."""
+    goal_handle.publish_feedback(Localize.Feedback(progress=float(progress), stage=stage, hypotheses=int(hypotheses),
+                                                   best_score=float(best) if math.isfinite(best) else 0.0))

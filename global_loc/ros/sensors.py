@@ -21,9 +21,11 @@ from dataclasses import dataclass
 from typing import Callable, Optional
 
 from ..core.cloud import CloudError
+from ..core.motion import pose_fitter
+from ..core.mount import LaserMount, MountError
 from ..core.mount3d import Mount3D, Mount3DError
 from ..core.outcome import CanceledError
-from ..core.scan import ScanError
+from ..core.scan import ScanError, scan_to_points
 from ..core.view import SensorReading, View, ViewConfig, ViewError, merge_view, reading_from_scan
 from .cloud import cloud_from_msg
 from .convert import scan_from_msg, stamp_seconds
@@ -128,6 +130,25 @@ class SensorMounts:
             return self.laser_fallback
         raise NoMounting(f'no mounting: no tf {self.base_frame} <- {frame or "(no frame_id)"} and no parameter '
                          f'{spec.mount_parameter} [x, y, z, roll, pitch, yaw]')
+
+
+    def laser_mount(self, specs: tuple, frame: str) -> LaserMount:
+        """The primary laser's mounting as the 2D methods take it (MountError: tilted, none)."""
+        primary = next((s for s in specs if s.primary), None)
+        if primary is None:
+            raise MountError('no laser configured (scan_topics is empty)')
+        return LaserMount.from_mount3d(self.mount(primary, frame))
+
+
+def laser_fit(matcher, laser_mount: Callable, scan_msg, pose):
+    """bnb's fit of a primary-laser scan at a base pose (the health watch's); None when the
+    scan or its mounting cannot be used."""
+    try:
+        mount = laser_mount(scan_msg.header.frame_id)
+        points = scan_to_points(mount.upright(scan_from_msg(scan_msg)))
+    except ScanError:
+        return None
+    return pose_fitter(matcher, points, mount.base_T_laser)(pose)[0]
 
 
 def _latest():

@@ -9,17 +9,13 @@ drives it (`~/change_state`). Live parameters apply to the next request (ros/par
 Three ways to ask, one path (ros/request_path.py), one localization at a time: action
 `localize` (feedback, typed outcome, search prior), `~/trigger` (std_srvs/Trigger) and
 `~/reinitialize_global_localization` (std_srvs/Empty, nav2's behaviour-tree node); and
-the health watch's own relocalization (`auto_relocalize`, ros/watch.py). docs/ARCHITECTURE.md
-has the threads, locks and hops.
-"""
+the health watch's own relocalization (`auto_relocalize`, ros/watch.py); each localizes the
+view of every sensor (ros/sensors.py). docs/ARCHITECTURE.md has the threads, locks and hops."""
 from __future__ import annotations
 
-import contextlib
 import functools
-import math
 import threading
 import time
-import traceback
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped, Twist
@@ -39,19 +35,18 @@ from global_loc_interfaces.action import Localize
 from ..core.localizer import Localizer
 from ..core.map_io import load_map_yaml
 from ..core.map_slot import MapSlot
-from ..core.motion import pose_fitter
-from ..core.mount import LaserMount, MountError
+from ..core.mount import LaserMount
 from ..core.newest_message import NewestMessage
 from ..core.outcome import Outcome
 from ..core.pose_history import PoseHistory
-from ..core.scan import ScanError, scan_to_points
-from .convert import map_from_msg, pose_from_msg, scan_from_msg, stamp_seconds
+from .convert import map_from_msg, pose_from_msg, stamp_seconds
+from .guards import InFlight, guard, warn_about_peers
 from .motion import resolve_by_motion
 from .node_main import exit_process, run_node
 from .parameters import BY_NAME, ConfigError, apply_live, check_set, declare_parameters, parameter_value, read_config
-from .request_path import Collaborators, RequestPath, goal_fields, trigger_message
+from .request_path import Collaborators, RequestPath, goal_fields, publish_feedback, trigger_message
 from .rviz import hypotheses_msg, local_map_msg, markers_msg
-from .sensors import SensorInputs, SensorMounts, subscribe
+from .sensors import SensorInputs, SensorMounts, laser_fit, subscribe
 from .watch import HealthWatch
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -79,7 +74,8 @@ class GlobalLocServer(LifecycleNode):
         self.watch = None
         self.mounts = None
         self.cmd_vel_pub = None
-        self._in_flight, self._in_flight_lock = 0, threading.Lock()
+        self.in_flight = InFlight()
+        self.guarded = functools.partial(guard, errors=self.errors, logger=self.get_logger())
         self.path = RequestPath(Collaborators(
             config=lambda: self.config, maps=self.maps, sensors=self.sensors,
             mount=lambda spec, frame: self.mounts.mount(spec, frame), laser_mount=self.laser_mount,
@@ -95,7 +91,7 @@ class GlobalLocServer(LifecycleNode):
         self.create_service(Trigger, '~/trigger', self.guarded(self.on_trigger), callback_group=self.group)
         self.create_service(Empty, '~/reinitialize_global_localization', self.guarded(self.on_reinitialize),
                             callback_group=self.group)
-        self.peer_check = self.create_timer(3.0, self.guarded(self.warn_about_peers), callback_group=self.group)
+        self.peer_check = self.create_timer(3.0, self.guarded(self.check_peers), callback_group=self.group)
         autostart = self.get_parameter('autostart').value
         if autostart:
             self.trigger_configure()
@@ -179,10 +175,9 @@ class GlobalLocServer(LifecycleNode):
         self.stop_work()
         for pub in self.pubs.values():
             self.destroy_lifecycle_publisher(pub)
-        for sub in self.subs:
-            self.destroy_subscription(sub)
-        for timer in self.own_timers:
-            self.destroy_timer(timer)
+        for destroy, handles in ((self.destroy_subscription, self.subs), (self.destroy_timer, self.own_timers)):
+            for handle in handles:
+                destroy(handle)
         if self.cmd_vel_pub is not None:
             self.destroy_publisher(self.cmd_vel_pub)
         self.pubs, self.subs, self.own_timers, self.cmd_vel_pub, self.config = {}, [], [], None, None
@@ -207,7 +202,7 @@ class GlobalLocServer(LifecycleNode):
         returns whether it is all over."""
         self.path.active = False
         self.path.stopping.set()
-        return lambda: self._in_flight == 0
+        return lambda: self.in_flight.count == 0
 
     def close(self) -> None:
         self.maps.close()
@@ -264,23 +259,13 @@ class GlobalLocServer(LifecycleNode):
         self.odom.put(msg)
 
     def fit_at(self, scan_msg, pose):
-        """The watch's fit of a scan at a base pose (None while no map is ready)."""
+        """The watch's fit of a primary-laser scan at a base pose (None while no map is ready)."""
         localizer = self.maps.current().built
-        if localizer is None:
-            return None
-        try:
-            mount = self.laser_mount(scan_msg.header.frame_id)
-            points = scan_to_points(mount.upright(scan_from_msg(scan_msg)))
-        except ScanError:
-            return None
-        return pose_fitter(localizer.matcher(WATCH_METHOD), points, mount.base_T_laser)(pose)[0]
+        return None if localizer is None else laser_fit(localizer.matcher(WATCH_METHOD), self.laser_mount, scan_msg,
+                                                        pose)
 
     def laser_mount(self, frame: str) -> LaserMount:
-        """The primary laser's mounting as the 2D methods take it (MountError: tilted, none)."""
-        primary = next((s for s in self.config.sensors if s.primary), None)
-        if primary is None:
-            raise MountError('no laser configured (scan_topics is empty)')
-        return LaserMount.from_mount3d(self.mounts.mount(primary, frame))
+        return self.mounts.laser_mount(self.config.sensors, frame)
 
     def on_health_tick(self) -> None:
         if not self.path.active:
@@ -322,16 +307,10 @@ class GlobalLocServer(LifecycleNode):
         self.get_logger().info('cancel requested')
         return CancelResponse.ACCEPT
 
-    @contextlib.contextmanager
-    def in_flight(self):
-        """Counts a request (goal, service call, relocalization) until its handler returns."""
-        with self._in_flight_lock:
-            self._in_flight += 1
-        try:
-            yield
-        finally:
-            with self._in_flight_lock:
-                self._in_flight -= 1
+    def check_peers(self) -> None:
+        """Once, a few seconds after start (discovery has seen the others)."""
+        self.peer_check.cancel()
+        warn_about_peers(self)
 
     def execute(self, goal_handle):
         """The action: serve the goal, then end it as its outcome says."""
@@ -360,37 +339,6 @@ class GlobalLocServer(LifecycleNode):
         with self.in_flight():
             self.path.serve({}, 'reinitialize')
         return response
-
-    # ---- guards ----------------------------------------------------------------------------
-    def guarded(self, callback):
-        """`callback` for a timer, subscription or service: an exception is logged (throttled),
-        counted on /diagnostics, and the node keeps spinning."""
-        name = getattr(callback, '__name__', 'callback')
-
-        @functools.wraps(callback)
-        def run(*args):
-            try:
-                return callback(*args)
-            except Exception as e:
-                self.errors[name] = self.errors.get(name, 0) + 1
-                self.get_logger().error(f'{name} failed ({self.errors[name]} so far): {type(e).__name__}: {e}\n'
-                                        f'{traceback.format_exc()}', throttle_duration_sec=10.0)
-                return args[1] if len(args) == 2 else None     # a service still answers (its response)
-        return run
-
-    def warn_about_peers(self) -> None:
-        """Once, a few seconds after start: another global_loc server on this domain would
-        execute every goal too (both publish poses)."""
-        self.peer_check.cancel()
-        peers = [ns for name, ns in self.get_node_names_and_namespaces() if name == self.get_name()]
-        if len(peers) > 1:
-            self.get_logger().error(f'{len(peers)} nodes named {self.get_name()} on this ROS domain: each executes '
-                                    f'every goal and publishes its poses; run one per domain or rename one')
-
-
-def publish_feedback(goal_handle, progress, stage, best, hypotheses=0) -> None:
-    goal_handle.publish_feedback(Localize.Feedback(progress=float(progress), stage=stage, hypotheses=int(hypotheses),
-                                                   best_score=float(best) if math.isfinite(best) else 0.0))
 
 
 def main(args=None):
