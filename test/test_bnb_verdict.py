@@ -12,7 +12,8 @@ from global_loc.core.localizer import Localizer, LocalizerConfig
 from global_loc.core.matchers import MatchOptions, make_matcher
 from global_loc.core.matchers.base import Candidate
 from global_loc.core.matchers.bnb import BranchAndBoundMatcher, BranchAndBoundOptions
-from global_loc.core.matchers.bnb.verdict import judge
+from global_loc.core.matchers.bnb.kernels import SearchSpace
+from global_loc.core.matchers.bnb.verdict import band_covers, judge, keep_floor, searched_keep
 from global_loc.core.outcome import Outcome
 from global_loc.core.scan import scan_to_points
 from global_loc.core.transform import Rigid2D
@@ -97,3 +98,65 @@ def test_distinct_hypotheses_are_decided_once_in_metres_and_judged_as_the_matche
     gaps = [p.distance_to(q)[0] for p, q in alike]
     assert min(gaps) >= 0.5 - 2 * room.resolution     # distinct (refinement moves a peak by about a cell)
     assert min(gaps) < 0.75                           # places closer than 1 m are judged, not merged
+
+
+def test_the_band_searched_is_the_lead_a_confident_answer_needs_plus_the_refinement_allowance():
+    """At a full fit 5% (min_confidence 0.5 x keep_ratio's 10% band) plus band_allowance;
+    at a poor fit the whole keep_ratio band; the band's floor (fit x keep) never falls as
+    the incumbent's fit rises, so pruning by the incumbent never drops a node the final
+    band keeps."""
+    opt = OPTIONS
+    keep = [searched_keep(f, opt.keep_ratio, opt.min_confidence, opt.band_allowance) for f in np.linspace(0, 1, 501)]
+    assert keep[-1] == pytest.approx(1 - 0.05 - opt.band_allowance)
+    assert keep[0] == keep[200] == opt.keep_ratio      # fit 0.4: explained 1/3, the lead 15% > 10%
+    floors = np.linspace(0, 1, 501) * keep
+    assert np.all(np.diff(keep) >= 0) and np.all(np.diff(floors) >= 0)
+    assert searched_keep(1.0, opt.keep_ratio, opt.min_confidence, 1.0) == opt.keep_ratio   # the whole band
+
+
+def test_a_confident_answer_whose_runner_up_lies_outside_the_band_says_its_confidence_is_at_least_min_confidence():
+    """At a good fit the search sees only the band a confident answer needs: a best with
+    no other place in it is localized with confidence min_confidence, said as a floor;
+    a rival within the band gives the exact number as before; at a fit where the band
+    is keep_ratio's the confidence is the old one."""
+    alone = judge([place(0, 0.9)], OPTIONS)
+    assert alone.outcome == Outcome.LOCALIZED and alone.confidence == OPTIONS.min_confidence
+    assert alone.message == ('localized: confidence at least 0.50 (the search looked for other places only within '
+                             '5% of the best, the lead that needs)')
+    assert judge([place(0, 0.9), place(5, 0.8)], OPTIONS).message.startswith('localized: confidence at least 0.50')
+    poor_fit = judge([place(0, 0.5)], OPTIONS)           # explained 2/3: the lead 7.5% + 3% > 10%
+    assert poor_fit.outcome == Outcome.LOCALIZED and poor_fit.message == 'localized'
+    assert poor_fit.confidence == pytest.approx(2 / 3)
+    assert judge([place(0, 0.9), place(5, 0.86)], OPTIONS).confidence == pytest.approx(0.04 / 0.9 / 0.1)
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_the_verdict_on_the_band_has_the_outcome_of_the_verdict_on_the_whole_keep_ratio_band(seed):
+    """Random hypotheses (fits and see-through shares; here a leaf scores its refined fit):
+    judged as the whole 10% band saw them (band_allowance 1) and as the band set from the
+    best leaf's fit sees them - only the places within it, or all of them when band_covers
+    says a place below it could matter (the search runs again with keep_ratio's band) -
+    the same outcome and, but for a confident answer's floor, the same confidence."""
+    rng = np.random.default_rng(seed)
+    whole = BranchAndBoundOptions(band_allowance=1.0)
+    n_points = 200
+    space = SearchSpace(1, 1, 1, OPTIONS.keep_ratio, OPTIONS.min_confidence, OPTIONS.band_allowance, 0, 0, -1, 0, -1)
+    widened = 0
+    for _ in range(3000):
+        best_raw = int(rng.integers(0.3 * 255 * n_points, 255 * n_points))
+        raw = np.concatenate([[best_raw], np.floor(best_raw * rng.uniform(0.9, 1.0, rng.integers(0, 6)))])
+        fits = raw / (255 * n_points)
+        through = np.where(rng.random(len(fits)) < 0.3, rng.uniform(0, 0.2, len(fits)), 0.0)
+        cands = sorted([place(i, f, t) for i, (f, t) in enumerate(zip(fits, through, strict=True))],
+                       key=lambda c: -c.score)
+        floor = keep_floor(space, best_raw, n_points) / (255 * n_points)
+        seen = [c for c in cands if c.explained >= floor]
+        if not band_covers(seen, best_raw, n_points, space, OPTIONS.refine_rise):
+            seen, widened = cands, widened + 1
+        before, after = judge(cands, whole), judge(seen, OPTIONS)
+        assert after.outcome == before.outcome, (cands, seen, before, after)
+        if after.message.startswith('localized: confidence at least'):
+            assert before.confidence >= OPTIONS.min_confidence
+        else:
+            assert after.confidence == pytest.approx(before.confidence) and after.message == before.message
+    assert 0 < widened < 1500

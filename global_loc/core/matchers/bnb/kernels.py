@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit, uint64
 
 from ...pixel_kernels import image_point
+from .verdict import keep_floor
 
 # Plane k starts at flat[offsets[k]]; a level-h plane is stored at 1 / 2^shift[h] of the
 # map's resolution, plane_width[h] cells wide; (width, height): the padded map, pad: its
@@ -33,11 +34,12 @@ Planes = namedtuple('Planes', 'flat shift plane_width pad width height')
 ScanTables = namedtuple('ScanTables', 'base du dv row_start')
 # flags[offsets[h] + (v >> h) * width[h] + (u >> h)]: level-h block (u, v) holds a free cell.
 FreeBlocks = namedtuple('FreeBlocks', 'flags offsets width')
-# The map's size in cells, the number of leaf angles, and keep: nodes bounded at or above
-# keep x the best leaf are expanded. The search prior: only nodes with a cell within
+# The map's size in cells, the number of leaf angles, and the band's options: nodes
+# bounded at or above verdict.keep_floor(the best leaf) are expanded. The search prior: only nodes with a cell within
 # region_r cells of pixel (region_u, region_v) and an angle within region_w angle steps of
 # angle index region_a; region_r < 0 / region_w < 0: no bound.
-SearchSpace = namedtuple('SearchSpace', 'map_w map_h n_angles keep region_u region_v region_r region_a region_w')
+SearchSpace = namedtuple('SearchSpace', 'map_w map_h n_angles keep_ratio min_confidence band_allowance '
+                                       'region_u region_v region_r region_a region_w')
 
 
 @njit(cache=True, nogil=True, inline='always')
@@ -232,24 +234,25 @@ def search_step(planes, tables, free, space, heap, shared_best, budget, per_leve
     expands no node whose bound is below the best leaf, so it expands the fewest nodes
     any search with these bounds can. Every node whose bound reaches keep x best is
     expanded; the search is over when the top of the heap is below that. Leaves (level 0,
-    exact scores) reaching keep x best when scored are returned; the caller prunes them
+    exact scores) reaching keep_floor(best) when scored are returned; the caller prunes them
     by the final threshold. Counts expansions per level into per_level.
     Returns (expansions, done, leaves (m, 4): u, v, a, score, heap).
     """
     keys, nodes, size = heap
-    keep = space.keep
     leaves = np.empty((64, 4), np.int64)
     n_leaves = 0
     n_points = tables.du.shape[1]
     parent = np.empty(n_points, np.int64)
     parent_rest = np.zeros(n_points + 1, np.int64)     # parent_rest[i]: sum of parent[i:]
     best = shared_best[0]
+    floor = keep_floor(space, best, n_points)
     expanded = 0
     done = False
     while expanded < budget:
         if shared_best[0] > best:      # a leaf another thread's search found
             best = shared_best[0]
-        if size[0] == 0 or (keys[0] >> 3) < keep * best:      # the top node's bound (heap_key)
+            floor = keep_floor(space, best, n_points)
+        if size[0] == 0 or (keys[0] >> 3) < floor:      # the top node's bound (heap_key)
             done = True
             break
         _, h, u, v, a = heap_pop(keys, nodes, size)
@@ -262,13 +265,14 @@ def search_step(planes, tables, free, space, heap, shared_best, budget, per_leve
             cu, cv, ca, searched = child_node(free, space, u, v, a, h, c)
             if not searched:
                 continue
-            cb = child_bound(planes, tables, cu, cv, ca, h - 1, parent, parent_rest, int(math.ceil(keep * best)))
+            cb = child_bound(planes, tables, cu, cv, ca, h - 1, parent, parent_rest, floor)
             if h == 1:      # a leaf: its exact score
                 if cb > best:
                     best = cb
+                    floor = keep_floor(space, best, n_points)
                     if cb > shared_best[0]:
                         shared_best[0] = cb
-                if cb >= keep * best:
+                if cb >= floor:
                     if n_leaves == leaves.shape[0]:
                         grown = np.empty((2 * n_leaves, 4), np.int64)
                         grown[:n_leaves] = leaves
@@ -278,7 +282,7 @@ def search_step(planes, tables, free, space, heap, shared_best, budget, per_leve
                     leaves[n_leaves, 2] = ca
                     leaves[n_leaves, 3] = cb
                     n_leaves += 1
-            elif cb >= keep * best:
+            elif cb >= floor:
                 keys, nodes = heap_push(keys, nodes, size, heap_key(cb, h - 1), h - 1, cu, cv, ca)
     return expanded, done, leaves[:n_leaves], (keys, nodes, size)
 
@@ -335,7 +339,7 @@ def warm_up() -> None:
     tables = ScanTables(np.zeros((2, 1), np.int64), du, du, np.array([0, 2], np.int64))
     top = np.zeros((1, 4), np.int64)
     node_bounds(planes, tables, top[:, 0], top[:, 1], top[:, 2], 1)
-    space = SearchSpace(2, 2, 2, 0.9, 0.0, 0.0, -1.0, 0.0, -1.0)
+    space = SearchSpace(2, 2, 2, 0.9, 0.5, 0.03, 0.0, 0.0, -1.0, 0.0, -1.0)
     search_step(planes, tables, FreeBlocks(np.ones(32, np.uint8), zeros, widths), space,
                 make_heap(top, 1), np.zeros(1, np.int64), 10, np.zeros(2, np.int64))
     region_mask(space, top[:, 0], top[:, 1], top[:, 2], 1)

@@ -5,8 +5,8 @@ reported and a cancel is seen between them, on one heap per thread.
 The top nodes are dealt to one heap per thread (the kernel releases the GIL); the
 threads share the best leaf found so far, so each prunes by the best any has found. A
 thread whose heap runs out takes half of the fullest one. The result does not depend on
-the threads: every node reaching keep_ratio x the final best is expanded whatever the
-order, and the leaves are put in pose order before anyone picks peaks from them.
+the threads: every node reaching the final best's band (verdict.keep_floor) is expanded
+whatever the order, and the leaves are put in pose order before anyone picks peaks from them.
 """
 from __future__ import annotations
 
@@ -22,6 +22,7 @@ import numpy as np
 
 from ..base import ProgressFn
 from .kernels import PAD, FreeBlocks, Planes, ScanTables, SearchSpace, dive, make_heap, search_step, split_heap
+from .verdict import keep_floor
 
 
 @dataclass(frozen=True)
@@ -30,14 +31,15 @@ class SearchStats:
     exact: bool            # False when max_nodes stopped it: a better place may be unexplored
     angles: int            # leaf headings over 360 deg
     points: int            # scan points searched with
-    leaves: int            # leaves within keep_ratio of the best
+    leaves: int            # leaves within the searched band of the best (verdict.searched_keep)
     expansions: int
     per_level: tuple       # expansions per level
     top_nodes: int
     threads: int
     best_leaf: float       # the best leaf's score, in [0, 1]
-    search_s: float = 0.0  # seconds in the search proper (the top nodes' bounds and the tree), not in
-                           # preparing the scan's tables or refining, checking and ranking the peaks
+    search_s: float = 0.0  # seconds in the search proper (the tree), not in preparing the scan's
+                           # tables or refining, checking and ranking the peaks
+    widened: bool = False  # searched again with keep_ratio's band (verdict.band_covers was false)
 
 
 def search_threads() -> int:
@@ -67,7 +69,7 @@ class ThreadedSearch:
     def run(self, planes: Planes, tables: ScanTables, free: FreeBlocks, space: SearchSpace, top_nodes: np.ndarray,
             top_level: int, max_nodes: int, progress: Optional[ProgressFn],
             deadline: float = math.inf) -> tuple[np.ndarray, np.ndarray, bool]:
-        """Expand every node whose bound reaches space.keep x the best leaf, from the top
+        """Expand every node whose bound reaches the best leaf's band (keep_floor), from the top
         nodes (rows u, v, a, bound). Returns the leaves scoring that high (rows u, v,
         angle index, raw score) in pose order, the expansions per level, and whether the
         search was exhaustive (False when max_nodes or the deadline (time.monotonic())
@@ -108,7 +110,7 @@ class ThreadedSearch:
             if progress:   # the server's progress callback raises CanceledError on a cancel request
                 progress(min(0.95, expanded / max_nodes), shared_best[0] / (255.0 * tables.du.shape[1]))
         leaves = np.concatenate(found) if found else np.empty((0, 4), np.int64)
-        leaves = leaves[leaves[:, 3] >= space.keep * shared_best[0]]
+        leaves = leaves[leaves[:, 3] >= keep_floor(space, shared_best[0], tables.du.shape[1])]
         # in pose order, not the order the threads found them: equal scores then pick the
         # same peaks whatever the threads; once each (the search may find a dive's leaf again)
         _, first = np.unique((leaves[:, 0] * space.map_h + leaves[:, 1]) * space.n_angles + leaves[:, 2],

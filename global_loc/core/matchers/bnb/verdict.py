@@ -3,11 +3,61 @@ the options - the one place the confidence rule is written in code (the README s
 it for users). A search stopped short is judged in base.Matcher.judge."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from ...outcome import Outcome
 from ..base import Candidate, Verdict
 from .options import BranchAndBoundOptions
+
+
+@njit(cache=True, nogil=True)
+def searched_keep(fit, keep_ratio, min_confidence, band_allowance):
+    """The band the search explores below its best leaf (of field score `fit`), as a
+    ratio: nodes bounded at or above searched_keep x the best leaf are expanded. It is
+    the lead a confident answer needs at this fit (min_confidence x (1 - keep_ratio) /
+    explained, 5% at a full fit: a rival farther behind cannot change the outcome, only
+    the confidence number) widened by band_allowance for refinement (a leaf is scored at
+    a cell centre, the verdict at its refined pose: a rival's leaf lies up to that much
+    farther behind than its refined score), and never wider than keep_ratio's band.
+    Non-decreasing in fit, and fit x searched_keep rises with the fit, so a search
+    pruning by the incumbent's band prunes no node the final band would keep."""
+    explained = min(max((fit - 0.3) / 0.3, 0.0), 1.0)
+    if explained <= 0.0:
+        return keep_ratio
+    return max(keep_ratio, 1.0 - min_confidence * (1.0 - keep_ratio) / explained - band_allowance)
+
+
+@njit(cache=True, nogil=True)
+def keep_floor(space, best, n_points):
+    """The lowest bound (raw, an integer: kernels.SearchSpace's band options) a node needs
+    to be expanded, and a leaf to be kept, when the best leaf scores `best` (raw) on
+    n_points points."""
+    fit = best / (255.0 * max(n_points, 1))
+    return np.int64(math.ceil(searched_keep(fit, space.keep_ratio, space.min_confidence, space.band_allowance) * best))
+
+
+def band_covers(candidates: list[Candidate], best_raw: int, n_points: int, space, refine_rise: float) -> bool:
+    """Whether the band searched below the best leaf (raw score best_raw; space: the
+    search's kernels.SearchSpace) holds every place that can change the verdict. A place
+    below the band refines to at most its floor + refine_rise (the refinement's largest
+    rise, measured); it can change nothing when that is more than the lead a confident
+    answer needs behind the best's ranking score (which is at most its field score, so
+    it can neither outrank the best nor come within the lead in either score). Always
+    true where the band is keep_ratio's: there is nothing wider to search."""
+    fit = best_raw / (255.0 * max(n_points, 1))
+    if not candidates or searched_keep(fit, space.keep_ratio, space.min_confidence,
+                                       space.band_allowance) <= space.keep_ratio:
+        return True
+    best = candidates[0]
+    explained = min(max((best.explained - 0.3) / 0.3, 0.0), 1.0)
+    if explained <= 0:
+        return False
+    need = space.min_confidence * (1.0 - space.keep_ratio) / explained
+    floor = keep_floor(space, best_raw, n_points) / (255.0 * max(n_points, 1))
+    return floor + refine_rise < (1.0 - need) * best.score
 
 
 def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdict:
@@ -20,20 +70,33 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
     smaller of the ranking score's and the field score's: the free-space check may
     reorder places but never vouches for one alone. `localized` needs confidence >=
     min_confidence; otherwise `poor match` when the map explains too little of the scan,
-    else `ambiguous`."""
+    else `ambiguous`.
+
+    Where the search looked only in the band a confident answer needs (searched_keep
+    above keep_ratio: a good fit), a place it did not see lies at least that lead behind:
+    a localized result then says its confidence is at least min_confidence, the most
+    the band can vouch for."""
     opt = options
     if not candidates:
         return Verdict(Outcome.NO_MATCH, 0.0, 'bnb found no pose on free space')
     best, others = candidates[0], candidates[1:]
     fit = [c.explained for c in candidates]
-    # No other peak found means none scored above keep_ratio x best (in either score).
-    second = others[0].score if others else opt.keep_ratio * best.score
-    rival = max(fit[1:] + [opt.keep_ratio * max(fit)])
+    explained = float(np.clip((fit[0] - 0.3) / 0.3, 0.0, 1.0))
+    # the lead a confident answer needs at this fit
+    need = opt.min_confidence * (1.0 - opt.keep_ratio) / explained if explained > 0 else math.inf
+    capped = searched_keep(fit[0], opt.keep_ratio, opt.min_confidence, opt.band_allowance) > opt.keep_ratio
+    # No other peak found means none scored above `unseen` x best (in either score).
+    unseen = 1.0 - need if capped else opt.keep_ratio
+    second = others[0].score if others else unseen * best.score
+    rival = max(fit[1:] + [unseen * max(fit)])
     rank_margin = (best.score - second) / best.score if best.score > 0 else 0.0
     fit_margin = (fit[0] - rival) / fit[0] if fit[0] > 0 else 0.0
     margin = min(rank_margin, fit_margin)
-    explained = float(np.clip((fit[0] - 0.3) / 0.3, 0.0, 1.0))
     conf = float(np.clip(margin / (1.0 - opt.keep_ratio), 0.0, 1.0)) * explained
+    if capped and margin >= need * (1.0 - 1e-9):      # (1e-9: no other place seen, margin == need)
+        return Verdict(Outcome.LOCALIZED, opt.min_confidence,
+                       f'localized: confidence at least {opt.min_confidence:.2f} (the search looked for other '
+                       f'places only within {100 * need:.0f}% of the best, the lead that needs)')
     if conf >= opt.min_confidence:
         return Verdict(Outcome.LOCALIZED, conf, 'localized')
     if explained < 1.0 and explained < opt.min_confidence:
@@ -46,7 +109,6 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
                        f'({100 * (best.see_through or 0.0):.0f}% for the best); see the hypotheses')
     # the rivals: every other place within the lead a confident answer needs at this fit
     # (not only those within twice the margin: exact twins differ by rounding, ~1e-15)
-    need = opt.min_confidence * (1.0 - opt.keep_ratio) / explained
     close = sum(c.score >= best.score * (1.0 - need) for c in others)
     return Verdict(Outcome.AMBIGUOUS, conf, f'ambiguous: {max(close, 1)} other place(s) within {100 * need:.0f}% '
                                             f'of the best (the closest {100 * max(margin, 0.0):.1f}% behind); '

@@ -1,0 +1,115 @@
+"""Reads band_ab.py's rows.jsonl files: changed outcomes (A against B), the refinement's
+rise, the allowance each trial's outcome needs, and time per suite / map.
+
+    python benchmarks/results/band/summarize.py benchmarks/results/band/*/rows.jsonl
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from collections import defaultdict
+
+import numpy as np
+
+from global_loc.core.matchers.bnb.options import BranchAndBoundOptions
+
+OPT = BranchAndBoundOptions()
+
+
+def need_at(fit: float) -> float:
+    explained = min(max((fit - 0.3) / 0.3, 0.0), 1.0)
+    return OPT.min_confidence * (1 - OPT.keep_ratio) / explained if explained > 0 else math.inf
+
+
+def needed_allowance(row: dict):
+    """The allowance this A row's outcome needs: over the peaks that can change it (the
+    ranking's best, and every place within the lead a confident answer needs of it, in
+    field or ranking score), how far behind the best leaf their leaves lie, less the lead
+    needed at the best leaf's fit. None without peaks or at a fit where the band is the
+    whole keep_ratio band anyway."""
+    leaf, fit, cands = row['peak_leaf'], row['peak_fit'], row['candidates']
+    if not leaf or len(fit) != len(leaf) or not cands:
+        return None
+    rank_of = {f: r for r, f in cands}
+    rank = [rank_of.get(f) for f in fit]
+    r0, f0 = cands[0]
+    need = need_at(f0)
+    if not math.isfinite(need):
+        return None
+    l_max = max(leaf)
+    matter = [i for i in range(len(leaf)) if fit[i] == f0 or fit[i] >= (1 - need) * f0
+              or (rank[i] is not None and rank[i] >= (1 - need) * r0)]
+    gap = max(1 - leaf[i] / l_max for i in matter)
+    return gap - need_at(l_max), len(matter) - 1
+
+
+def pct(values, q):
+    return float(np.percentile(values, q)) if values else float('nan')
+
+
+def main(paths) -> int:
+    rows = [json.loads(line) for p in paths for line in open(p) if line.strip()]
+    by = defaultdict(dict)
+    for r in rows:
+        by[(r['suite'], r['map'], r['trial'], json.dumps(r['truth']))][r['variant']] = r
+    changed, conf_changed, hyp_changed = [], 0, 0
+    for key, ab in sorted(by.items(), key=lambda kv: str(kv[0])):
+        a, b = ab.get('A'), ab.get('B')
+        if not (a and b):
+            continue
+        same = all(a.get(k) == b.get(k) for k in ('outcome', 'ok', 'success', 'message', 'top4_ok'))
+        if not same:
+            changed.append((key, a['outcome'], b['outcome'], a.get('ok'), b.get('ok'), a.get('verdict_message', ''),
+                            b.get('verdict_message', '')))
+        conf_changed += a.get('confidence') != b.get('confidence')
+        hyp_changed += a.get('hyp_scores') != b.get('hyp_scores')
+    pairs = len([1 for ab in by.values() if len(ab) == 2])
+    print(f'{pairs} A/B pairs; outcome, ok, success, message or top4_ok changed on {len(changed)}; '
+          f'confidence number changed on {conf_changed}; hypothesis scores (first 4) on {hyp_changed}')
+    for c in changed:
+        print('  CHANGED', c)
+    # the refinement's rise, and each trial's needed allowance (A rows: the whole band)
+    a_rows = [r for r in rows if r['variant'] == 'A']
+    rise = [f - lf for r in a_rows for lf, f in zip(r['peak_leaf'], r['peak_fit'], strict=False)]
+    rel = [f / lf - 1 for r in a_rows for lf, f in zip(r['peak_leaf'], r['peak_fit'], strict=False) if lf > 0]
+    print(f'refined - leaf score over {len(rise)} peaks: min {min(rise):+.4f}, p5 {pct(rise, 5):+.4f}, median '
+          f'{pct(rise, 50):+.4f}, p95 {pct(rise, 95):+.4f}, p99 {pct(rise, 99):+.4f}, max {max(rise):+.4f}; relative '
+          f'max {max(rel):+.4f}')
+    # a peak's gap to the best, in leaf score less in refined score: what refinement closes
+    closing = []
+    for r in a_rows:
+        lf, f = r['peak_leaf'], r['peak_fit']
+        if len(lf) > 1 and len(f) == len(lf):
+            closing += [(1 - lf[i] / max(lf)) - (1 - f[i] / max(f)) for i in range(len(lf))]
+    if closing:
+        print(f'leaf gap - refined gap over {len(closing)} peaks: p50 {pct(closing, 50):+.4f}, p95 '
+              f'{pct(closing, 95):+.4f}, p99 {pct(closing, 99):+.4f}, max {max(closing):+.4f}')
+    needed = [(needed_allowance(r), r) for r in a_rows]
+    needed = [(n[0], n[1], r) for n, r in needed if n is not None]
+    vals = [n for n, _, _ in needed]
+    print(f'allowance each outcome needs, {len(vals)} trials with peaks: median {pct(vals, 50):+.4f}, p95 '
+          f'{pct(vals, 95):+.4f}, max {max(vals):+.4f}; with a rival that can change the outcome: '
+          f'{sum(k > 0 for _, k, _ in needed)}')
+    for n, k, r in sorted(needed, key=lambda t: -t[0])[:6]:
+        print(f'  needs {n:+.4f}: {r["suite"]} {r["map"]} trial {r["trial"]} {r["outcome"]} rivals {k} '
+              f'leaf {[round(x, 3) for x in r["peak_leaf"][:4]]} fit {[round(x, 3) for x in r["peak_fit"][:4]]}')
+    # time per suite and map
+    print('| suite | map / log | n | A median | A p95 | B median | B p95 | A expansions (median) | B |')
+    groups = defaultdict(lambda: defaultdict(list))
+    for r in rows:
+        name = r.get('log') or r['map']
+        if r['suite'] == 'changed':
+            name = f'level {r["change"]}'
+        groups[(r['suite'], name)][r['variant']].append(r)
+    for (suite, name), ab in sorted(groups.items()):
+        t = {v: [r['time_s'] for r in ab[v] if isinstance(r.get('time_s'), float) and math.isfinite(r['time_s'])]
+             for v in 'AB'}
+        e = {v: [r['expansions'] for r in ab[v] if 'expansions' in r] for v in 'AB'}
+        print(f'| {suite} | {name} | {len(ab["A"])} | {pct(t["A"], 50):.3f} | {pct(t["A"], 95):.3f} | '
+              f'{pct(t["B"], 50):.3f} | {pct(t["B"], 95):.3f} | {pct(e["A"], 50):.0f} | {pct(e["B"], 50):.0f} |')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))
