@@ -93,10 +93,13 @@ class HealthWatch:
         with self.lock:
             if fit is not None:
                 self.supervisor.on_fit(now, fit)
+        self.publish()          # the state the fit gives (lost, ...), before a relocalization starts
+        with self.lock:
             reason = self.supervisor.should_relocalize(now, scan_arrived=scan_msg is not None)
             if reason:
                 self.supervisor.started_relocalization(now)
-        self.publish()
+        if reason:
+            self.publish()
         return reason
 
     def finished(self, outcome: Outcome, published: bool) -> None:
