@@ -249,6 +249,8 @@ def check_set(current: dict, params, configured: bool) -> SetParametersResult:
                 f'{p.name}: read at configure, not live - deactivate and clean up the node, set it, configure '
                 f'again'))
         values[p.name] = p.value
+    if not any(p.name in BY_NAME for p in params):    # only mountings: the others' values are not at stake
+        return SetParametersResult(successful=True)
     try:
         build_config(values)
     except ConfigError as e:
