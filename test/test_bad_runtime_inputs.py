@@ -7,12 +7,12 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from ros_helpers import TRUTH, localize, pose_of, start_scan_publisher
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
-from test_runtime_changes import Operator, grid_msg
+from test_runtime_changes import Operator
 
 from conftest import OFFICE_YAML, assert_pose_near
 from global_loc.core.map_io import load_map_yaml
 from global_loc.core.transform import Rigid2D
-from global_loc.ros.convert import pose_with_covariance
+from global_loc.ros.convert import map_to_msg, pose_with_covariance
 from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, start_server
 
 pytestmark = pytest.mark.ros
@@ -55,7 +55,7 @@ def test_an_upside_down_laser_is_localized_with_laser_roll(tmp_path):
 def test_a_map_with_an_absurd_resolution_is_refused_at_load_then_a_good_one_works(tmp_path):
     env = isolated_env()
     op = Operator(env)
-    bad = grid_msg(load_map_yaml(OFFICE_YAML))
+    bad = map_to_msg(load_map_yaml(OFFICE_YAML))
     bad.info.resolution = 1e-8
     op.map_pub.publish(bad)
     server = start_server(env, tmp_path / 'server.log', 'use_map_topic:=true')
@@ -64,7 +64,7 @@ def test_a_map_with_an_absurd_resolution_is_refused_at_load_then_a_good_one_work
         server.wait_for_output('map not loaded', timeout=20)
         code, result = localize(env, '--timeout', '5')
         assert result['outcome'] == 'no_map' and 'resolution' in result['message'], result
-        op.map_pub.publish(grid_msg(load_map_yaml(OFFICE_YAML)))
+        op.map_pub.publish(map_to_msg(load_map_yaml(OFFICE_YAML)))
         server.wait_for_output('map 3 in use', timeout=20)
         code, result = localize(env, '--timeout', '10')
         assert code == 0, result

@@ -179,18 +179,11 @@ def test_bnb_options_are_server_parameters(tmp_path):
 
 
 def office_grid_msg(origin_x=None):
-    import numpy as np
-    from nav_msgs.msg import OccupancyGrid
-
     from global_loc.core.map_io import load_map_yaml
-    m = load_map_yaml(OFFICE_YAML)
-    msg = OccupancyGrid()
-    msg.header.frame_id = 'map'
-    msg.info.resolution, msg.info.width, msg.info.height = m.resolution, m.width, m.height
-    msg.info.origin.position.x = m.origin.x if origin_x is None else origin_x
-    msg.info.origin.position.y = m.origin.y
-    msg.info.origin.orientation.w = 1.0
-    msg.data = np.flipud(m.occupancy).astype(np.int8).ravel().tolist()
+    from global_loc.ros.convert import map_to_msg
+    msg = map_to_msg(load_map_yaml(OFFICE_YAML))
+    if origin_x is not None:
+        msg.info.origin.position.x = origin_x
     return msg
 
 

@@ -19,7 +19,7 @@ from ros_helpers import TRUTH, localize, pose_of, start_scan_publisher
 from conftest import OFFICE_YAML, assert_pose_near
 from global_loc.core.map_io import load_map_yaml, make_map, save_map_yaml
 from global_loc.core.transform import Rigid2D, pose_correct
-from global_loc.ros.convert import pose_from_msg
+from global_loc.ros.convert import map_to_msg, pose_from_msg
 from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, start_client, start_server
 
 pytestmark = pytest.mark.ros
@@ -64,17 +64,6 @@ def client_in_background(env, *args):
     return result
 
 
-def grid_msg(occupancy_map) -> OccupancyGrid:
-    msg = OccupancyGrid()
-    msg.header.frame_id = 'map'
-    msg.info.resolution, msg.info.width, msg.info.height = occupancy_map.resolution, occupancy_map.width, \
-        occupancy_map.height
-    msg.info.origin.position.x, msg.info.origin.position.y = occupancy_map.origin.x, occupancy_map.origin.y
-    msg.info.origin.orientation.w = 1.0
-    msg.data = np.flipud(occupancy_map.occupancy).astype(np.int8).ravel().tolist()
-    return msg
-
-
 def shifted_big_office(shift_m: float, size: int = 3000):
     """The office drawn 5 m further along x inside a big empty map: the same walls, another
     place - a scan of the office localizes 5 m off in it (and it takes long to prepare)."""
@@ -94,8 +83,8 @@ def test_two_maps_in_quick_succession_the_newest_received_is_used(tmp_path):
     server = start_server(env, tmp_path / 'server.log', 'use_map_topic:=true')
     publisher = start_scan_publisher(env, tmp_path / 'pub.log', OFFICE_YAML, TRUTH)
     try:
-        small = grid_msg(load_map_yaml(OFFICE_YAML))
-        op.map_pub.publish(grid_msg(shifted_big_office(5.0)))
+        small = map_to_msg(load_map_yaml(OFFICE_YAML))
+        op.map_pub.publish(map_to_msg(shifted_big_office(5.0)))
         server.wait_for_output('map 2 received')     # the big one is being prepared ...
         op.map_pub.publish(small)                     # ... when the newer, small one arrives
         code, result = localize(env, '--timeout', '20')
@@ -114,14 +103,14 @@ def test_two_maps_in_quick_succession_the_newest_received_is_used(tmp_path):
 def test_a_goal_whose_map_is_replaced_mid_search_publishes_nothing(tmp_path):
     env = isolated_env()
     op = Operator(env)
-    op.map_pub.publish(grid_msg(load_map_yaml(OFFICE_YAML)))
+    op.map_pub.publish(map_to_msg(load_map_yaml(OFFICE_YAML)))
     server = start_server(env, tmp_path / 'server.log', 'use_map_topic:=true')
     publisher = start_scan_publisher(env, tmp_path / 'pub.log', OFFICE_YAML, TRUTH)
     try:
         server.wait_for_output('map 2 in use')
         client = client_in_background(env, '--method', 'template_ccoeff', '--angle-step', '2', '--timeout', '10')
         server.wait_for_output('matching a scan', timeout=20)
-        op.map_pub.publish(grid_msg(shifted_big_office(5.0, size=800)))
+        op.map_pub.publish(map_to_msg(shifted_big_office(5.0, size=800)))
         code, result = client()
         assert result['outcome'] == 'no_map' and 'not published: a newer map arrived' in result['message'], result
         time.sleep(0.5)

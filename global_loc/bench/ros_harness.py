@@ -28,19 +28,6 @@ def stamp_ns(stamp) -> int:
     return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
-def map_to_msg(occupancy_map):
-    """An OccupancyGrid of an OccupancyMap (rows bottom-up, as ROS has them)."""
-    from nav_msgs.msg import OccupancyGrid
-    msg = OccupancyGrid()
-    msg.header.frame_id = 'map'
-    msg.info.resolution = occupancy_map.resolution
-    msg.info.width, msg.info.height = occupancy_map.width, occupancy_map.height
-    msg.info.origin.position.x, msg.info.origin.position.y = occupancy_map.origin.x, occupancy_map.origin.y
-    msg.info.origin.orientation.w = 1.0
-    msg.data = np.flipud(occupancy_map.occupancy).astype(np.int8).ravel().tolist()
-    return msg
-
-
 class Harness:
     """Spun in a background thread in an rclpy context of its own on the env's domain."""
 
@@ -127,6 +114,7 @@ class Harness:
         time.sleep(0.1)      # a scan taken after the teleport
 
     def publish_map(self, occupancy_map) -> None:
+        from ..ros.convert import map_to_msg
         self.map_pub.publish(map_to_msg(occupancy_map))
 
     def call(self, client, request, timeout: float = 15.0):

@@ -86,6 +86,17 @@ def map_from_msg(msg: OccupancyGrid) -> OccupancyMap:
                                np.asarray(msg.data, dtype=np.int16), source=f'OccupancyGrid on {msg.header.frame_id}')
 
 
+def map_to_msg(occupancy_map: OccupancyMap, frame_id: str = 'map') -> OccupancyGrid:
+    """An OccupancyGrid of an OccupancyMap (rows bottom-up, as ROS has them)."""
+    msg = OccupancyGrid()
+    msg.header.frame_id = frame_id
+    msg.info.resolution = float(occupancy_map.resolution)
+    msg.info.width, msg.info.height = occupancy_map.width, occupancy_map.height
+    msg.info.origin = pose_to_msg(occupancy_map.origin)
+    msg.data = np.flipud(occupancy_map.occupancy).astype(np.int8).ravel().tolist()
+    return msg
+
+
 def result_to_msg(result: LocalizationResult, frame_id: str, stamp, elapsed_s: float) -> Localize.Result:
     """The action result for a localization the matcher finished (stamped with the scan's time)."""
     out = Localize.Result(outcome=int(result.outcome), success=result.success, message=result.message,
