@@ -19,6 +19,15 @@ def localize(env, *args, timeout=120.0):
     return out.returncode, json.loads(out.stdout)
 
 
+def assert_localizes(env, truth: Rigid2D, *args) -> dict:
+    """The client (with `args`) localizes confidently, within the thesis criterion of `truth`."""
+    from conftest import assert_pose_near
+    code, result = localize(env, '--timeout', '10', *args)
+    assert code == 0, result
+    assert_pose_near(pose_of(result), truth)
+    return result
+
+
 def pose_of(result: dict) -> Rigid2D:
     return Rigid2D(result['pose']['x'], result['pose']['y'], result['pose']['yaw'])
 

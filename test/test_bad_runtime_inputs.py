@@ -4,12 +4,12 @@ import time
 
 import pytest
 from geometry_msgs.msg import PoseWithCovarianceStamped
-from ros_helpers import TRUTH, localize, pose_of, start_scan_publisher
+from ros_helpers import TRUTH, assert_localizes, localize, start_scan_publisher
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from test_runtime_changes import Operator
 
-from conftest import OFFICE_YAML, assert_pose_near
+from conftest import OFFICE_YAML
 from global_loc.core.map_io import load_map_yaml
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import map_to_msg, pose_with_covariance
@@ -31,9 +31,7 @@ def test_a_mirrored_scan_is_refused_with_the_reason_and_the_server_keeps_serving
         bad.stop()
     good = start_scan_publisher(env, tmp_path / 'good.log', OFFICE_YAML, TRUTH)
     try:
-        code, result = localize(env, '--timeout', '10')
-        assert code == 0, result
-        assert_pose_near(pose_of(result), TRUTH)
+        assert_localizes(env, TRUTH)
     finally:
         good.stop()
         assert server.stop() == 0
@@ -44,9 +42,7 @@ def test_an_upside_down_laser_is_localized_with_laser_roll(tmp_path):
     server = start_server(env, tmp_path / 'server.log', 'laser_roll:=3.141592653589793')
     publisher = start_scan_publisher(env, tmp_path / 'pub.log', OFFICE_YAML, TRUTH, mode='upside_down')
     try:
-        code, result = localize(env, '--timeout', '10')
-        assert code == 0, result
-        assert_pose_near(pose_of(result), TRUTH)
+        assert_localizes(env, TRUTH)
     finally:
         publisher.stop()
         assert server.stop() == 0
@@ -92,15 +88,10 @@ class Neighbour(TopicRecorder):
     def __init__(self, env):
         super().__init__(env, {'/global_loc_server/status': (String, reliable())}, 'neighbour')
         self.pose_pub = self.node.create_publisher(PoseWithCovarianceStamped, '/amcl_pose', reliable())
-        self.trigger = self.node.create_client(Trigger, '/global_loc_server/trigger')
+
 
     def call_trigger(self) -> Trigger.Response:
-        assert self.trigger.wait_for_service(timeout_sec=10.0)
-        future = self.trigger.call_async(Trigger.Request())
-        deadline = time.monotonic() + 30
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.02)
-        return future.result()
+        return self.call(Trigger, '/global_loc_server/trigger', Trigger.Request())
 
 
 def test_trigger_says_its_outcome_once_and_a_pose_in_another_frame_is_ignored(tmp_path):

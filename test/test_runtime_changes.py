@@ -32,25 +32,16 @@ class Operator(TopicRecorder):
     def __init__(self, env):
         super().__init__(env, {'/initialpose': (PoseWithCovarianceStamped, reliable())}, 'operator')
         self.map_pub = self.node.create_publisher(OccupancyGrid, '/map', reliable(depth=1, latched=True))
-        self.params = self.node.create_client(SetParameters, '/global_loc_server/set_parameters')
-        self.lifecycle = self.node.create_client(ChangeState, '/global_loc_server/change_state')
-
-    def call(self, client, request, timeout=30.0):
-        assert client.wait_for_service(timeout_sec=10.0), client.srv_name
-        future = client.call_async(request)
-        deadline = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert future.done(), f'{client.srv_name}: no answer in {timeout} s'
-        return future.result()
 
     def set(self, **values):
         """Set parameters (bnb__keep_ratio for bnb.keep_ratio); the results, in order."""
         params = [Parameter(name.replace('__', '.'), value=v).to_parameter_msg() for name, v in values.items()]
-        return self.call(self.params, SetParameters.Request(parameters=params)).results
+        return self.call(SetParameters, '/global_loc_server/set_parameters',
+                         SetParameters.Request(parameters=params)).results
 
     def transition(self, transition_id) -> bool:
-        return self.call(self.lifecycle, ChangeState.Request(transition=Transition(id=transition_id))).success
+        return self.call(ChangeState, '/global_loc_server/change_state',
+                         ChangeState.Request(transition=Transition(id=transition_id))).success
 
 
 def client_in_background(env, *args):

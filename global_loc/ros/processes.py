@@ -141,6 +141,7 @@ class TopicRecorder:
         rclpy.init(context=self.context, domain_id=int(env['ROS_DOMAIN_ID']))
         self.node = rclpy.create_node(node_name, context=self.context)
         self.messages = {name: [] for name in topics}
+        self._clients = {}
         for name, (msg_type, qos) in topics.items():
             self.node.create_subscription(msg_type, name, self.messages[name].append, qos)
         self.executor = SingleThreadedExecutor(context=self.context)
@@ -169,6 +170,20 @@ class TopicRecorder:
                 return True
             time.sleep(0.05)
         return False
+
+    def call(self, srv_type, name: str, request, timeout: float = 30.0):
+        """A service call from this node (its executor spins in the background thread);
+        AssertionError when the service is absent or does not answer in time."""
+        if name not in self._clients:
+            self._clients[name] = self.node.create_client(srv_type, name)
+        client = self._clients[name]
+        assert client.wait_for_service(timeout_sec=10.0), f'no service {name}'
+        future = client.call_async(request)
+        deadline = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert future.done(), f'{name} did not answer within {timeout} s'
+        return future.result()
 
     def close(self) -> None:
         # Stop and join the spinning thread before tearing the executor down: shutting an
