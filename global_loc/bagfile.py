@@ -12,6 +12,7 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
 from .core.mount import LaserMount, MountError
+from .core.mount3d import Mount3D
 from .core.scan import Scan
 from .core.transform import Rigid2D
 
@@ -51,14 +52,14 @@ def open_bag(path: str) -> Reader:
     return reader
 
 
-def scan_connections(reader: Reader, path: str, topic: str) -> list:
+def scan_connections(reader: Reader, path: str, topic: str, msgtype: str = LASER_SCAN) -> list:
     connections = [c for c in reader.connections if c.topic == topic]
     if not connections:
         topics = ', '.join(sorted({f'{c.topic} ({c.msgtype})' for c in reader.connections})) or 'none'
         raise BagError(f'{path}: no topic {topic}; the recording has: {topics}')
-    other = sorted({c.msgtype for c in connections} - {LASER_SCAN})
+    other = sorted({c.msgtype for c in connections} - {msgtype})
     if other:
-        raise BagError(f'{path}: {topic} carries {", ".join(other)}, not {LASER_SCAN}')
+        raise BagError(f'{path}: {topic} carries {", ".join(other)}, not {msgtype}')
     return connections
 
 
@@ -73,12 +74,20 @@ def read_scans(path: str, topic: str, every: int = 1) -> Iterator[tuple[int, Sca
         for index, (connection, _, raw) in enumerate(reader.messages(connections=connections)):
             if index % every:
                 continue
-            msg = typestore.deserialize_cdr(raw, connection.msgtype)
-            yield index, Scan(float(msg.angle_min), float(msg.angle_increment), float(msg.range_min),
-                              float(msg.range_max), msg.ranges.astype(float),
-                              msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
+            yield index, scan_of(typestore.deserialize_cdr(raw, connection.msgtype))
     finally:
         reader.close()
+
+
+def stamp_of(msg) -> float:
+    """A message's header stamp, s."""
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+def scan_of(msg) -> Scan:
+    """A deserialized sensor_msgs/LaserScan as a core Scan with its header's stamp."""
+    return Scan(float(msg.angle_min), float(msg.angle_increment), float(msg.range_min), float(msg.range_max),
+                msg.ranges.astype(float), stamp_of(msg), float(msg.angle_max))
 
 
 def read_mounting(path: str, topic: str, base_frame: str) -> BagMounting:
@@ -86,34 +95,80 @@ def read_mounting(path: str, topic: str, base_frame: str) -> BagMounting:
     composed from /tf_static and the /tf transforms that never change in the recording.
     MountingNotFound (with the reason) when the recording does not have it; BagError when
     the recording is unreadable or the laser is not level."""
+    found = read_mountings(path, {topic: LASER_SCAN}, base_frame)[topic]
+    if isinstance(found, MountingNotFound):
+        raise found
+    return BagMounting(planar_mount(found.matrix, frame_name(base_frame), found.frame), found.source, found.chain)
+
+
+@dataclass(frozen=True)
+class BagMount3D:
+    """A sensor's full 3D mounting on the base as the recording's tf gives it."""
+    mount: Mount3D
+    matrix: np.ndarray         # 4x4 base_T_sensor
+    frame: str                 # the sensor's frame (its messages' frame_id)
+    source: str                # the topics it was read from
+    chain: str                 # the frames it composes
+
+    def as_dict(self) -> dict:
+        return {'from': self.source, 'frames': self.chain,
+                **dict(zip(('x', 'y', 'z', 'roll', 'pitch', 'yaw'), (round(v, 6) for v in self.mount.as_tuple())))}
+
+
+def read_mountings(path: str, topics: dict, base_frame: str) -> dict:
+    """topic -> BagMount3D, or the MountingNotFound saying why not, of each topic's sensor
+    (`topics`: topic -> its message type): the frame of its first message on `base_frame`,
+    composed from /tf_static and the /tf transforms that never change in the recording.
+    BagError when the recording is unreadable or a topic is missing or of another type."""
     reader = open_bag(path)
     try:
         typestore = get_typestore(Stores.ROS2_JAZZY)
-        first = next(reader.messages(connections=scan_connections(reader, path, topic)), None)
-        if first is None:
-            raise MountingNotFound(f'no LaserScan on {topic}')
-        laser_frame = frame_name(typestore.deserialize_cdr(first[2], first[0].msgtype).header.frame_id)
-        if not laser_frame:
-            raise MountingNotFound(f'the scans on {topic} have no frame_id')
+        frames = {}
+        for topic, msgtype in topics.items():
+            first = next(reader.messages(connections=scan_connections(reader, path, topic, msgtype)), None)
+            frames[topic] = None if first is None else frame_name(
+                typestore.deserialize_cdr(first[2], first[0].msgtype).header.frame_id)
         parents, sources, moving = static_transforms(reader, typestore)
     finally:
         reader.close()
+    found = {}
+    for topic, frame in frames.items():
+        try:
+            if frame is None:
+                raise MountingNotFound(f'no message on {topic}')
+            if not frame:
+                raise MountingNotFound(f'the messages on {topic} have no frame_id')
+            found[topic] = chain_mount(parents, sources, moving, frame, frame_name(base_frame))
+        except MountingNotFound as e:
+            found[topic] = e
+    return found
+
+
+def chain_mount(parents: dict, sources: dict, moving: set, frame: str, base_frame: str) -> BagMount3D:
+    """`frame` on `base_frame` through the fixed transforms (static_transforms' answer)."""
     ignored = f' ({", ".join(sorted(moving))} on /tf move during the recording)' if moving else ''
-    if not parents and laser_frame != frame_name(base_frame):
+    if not parents and frame != base_frame:
         raise MountingNotFound(f'no transforms on {" or ".join(TF_TOPICS)} that stay fixed{ignored}')
-    base_frame = frame_name(base_frame)
-    up_from_laser, up_from_base = path_to_root(parents, laser_frame), path_to_root(parents, base_frame)
-    common = next((f for f in up_from_laser if f in up_from_base), None)
+    up_from_frame, up_from_base = path_to_root(parents, frame), path_to_root(parents, base_frame)
+    common = next((f for f in up_from_frame if f in up_from_base), None)
     if common is None:
-        raise MountingNotFound(f'no chain of fixed transforms from {base_frame} to the laser frame {laser_frame} '
+        raise MountingNotFound(f'no chain of fixed transforms from {base_frame} to the sensor frame {frame} '
                                f'on {" or ".join(TF_TOPICS)}{ignored}')
-    laser_chain = up_from_laser[:up_from_laser.index(common) + 1]
+    frame_chain = up_from_frame[:up_from_frame.index(common) + 1]
     base_chain = up_from_base[:up_from_base.index(common) + 1]
-    base_T_laser = np.linalg.inv(root_T(parents, base_chain)) @ root_T(parents, laser_chain)
-    used = {sources[f] for f in laser_chain[:-1] + base_chain[:-1]}
-    return BagMounting(planar_mount(base_T_laser, base_frame, laser_frame),
-                       ', '.join(sorted(used)) or f'the scans\' frame_id is {base_frame}',
-                       ' -> '.join(base_chain + laser_chain[-2::-1]))
+    base_T_frame = np.linalg.inv(root_T(parents, base_chain)) @ root_T(parents, frame_chain)
+    used = {sources[f] for f in frame_chain[:-1] + base_chain[:-1]}
+    return BagMount3D(mount3d_of(base_T_frame), base_T_frame, frame,
+                      ', '.join(sorted(used)) or f'the messages\' frame_id is {base_frame}',
+                      ' -> '.join(base_chain + frame_chain[-2::-1]))
+
+
+def mount3d_of(base_T_sensor: np.ndarray) -> Mount3D:
+    """x y z roll pitch yaw of a 4x4 transform (URDF's fixed-axis rpy)."""
+    r = base_T_sensor[:3, :3]
+    roll, pitch = math.atan2(r[2, 1], r[2, 2]), math.asin(max(-1.0, min(1.0, -r[2, 0])))
+    yaw = math.atan2(r[1, 0], r[0, 0])
+    return Mount3D(*(float(v) for v in base_T_sensor[:3, 3]), roll, pitch, yaw)
 
 
 def frame_name(frame_id: str) -> str:

@@ -15,6 +15,7 @@ from geometry_msgs.msg import Twist, Vector3
 from ..core.localizer import LocalizationResult
 from ..core.motion import HypothesisFollower, Observation
 from ..core.newest_message import NewestMessage
+from ..core.outcome import Stage
 from ..core.pose_history import PoseHistory
 from ..core.scan import ScanError, scan_to_points
 from ..core.transform import Rigid2D
@@ -63,7 +64,7 @@ def resolve_by_motion(result: LocalizationResult, first_msg, base_T_laser: Rigid
 
     def on_step(f: HypothesisFollower):
         tracks = f.resolver.tracks
-        feedback(0.95, 'resolving_by_motion', tracks[0].evidence if tracks else 0.0, len(tracks))
+        feedback(0.95, Stage.RESOLVING_BY_MOTION, tracks[0].evidence if tracks else 0.0, len(tracks))
 
     try:
         follower.follow(live_observations(), on_step)

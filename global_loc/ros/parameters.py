@@ -97,8 +97,9 @@ SPECS = [
     Spec('method', _L.method, f'default matcher: {", ".join(method_names())}', live=True),
     Spec('angle_step_deg', _L.angle_step_deg, 'rotation step of the template matcher, degrees', limits.ANGLE_STEP_DEG,
          live=True),
-    Spec('opening_kernel', _L.closing_kernel, 'opening kernel of the local map, pixels (0 = off)', (0, 31),
-         live=True),
+    Spec('opening_kernel', _L.closing_kernel, 'kernel of the morphological closing of the local map\'s obstacles '
+                                              '(the thesis\'s "opening" of its free space), pixels (0 = off)',
+         (0, 31), live=True),
     Spec('covariance_xy', _L.covariance_xy, 'x and y variance published with the thesis matchers, m^2',
          (1e-6, 100.0), live=True),
     Spec('covariance_yaw', _L.covariance_yaw, 'yaw variance published with the thesis matchers, rad^2',

@@ -21,7 +21,7 @@ from global_loc_interfaces.action import Localize
 from ..core.limits import BudgetError
 from ..core.map_slot import MapSlot
 from ..core.mount import LaserMount
-from ..core.outcome import CanceledError, Outcome
+from ..core.outcome import CanceledError, Outcome, Stage
 from ..core.pose_history import PoseHistory
 from ..core.request import Request, RequestError, make_request
 from ..core.scan import ScanError, scan_to_points
@@ -64,15 +64,15 @@ class RequestPath:
     def serve(self, fields: dict, origin: str, cancelled=lambda: False, feedback=lambda *a: None) -> Localize.Result:
         """One request (`fields`: make_request's keywords); never raises."""
         if not self.active:
-            return self.refuse(Outcome.NOT_ACTIVE, self.inactive_reason)
+            return self.end_early(Outcome.NOT_ACTIVE, self.inactive_reason)
         if not self.busy.acquire(blocking=False):
-            return self.refuse(Outcome.BUSY, 'busy: another localization is running (one at a time); retry when '
+            return self.end_early(Outcome.BUSY, 'busy: another localization is running (one at a time); retry when '
                                              'it ends', throttle=True)
         try:
             request = make_request(self.c.config().request_defaults(), origin=origin, **fields)
             return self.run(request, lambda: cancelled() or self.stopping.is_set(), feedback)
         except RequestError as e:
-            return self.refuse(Outcome.BAD_GOAL, f'bad request: {e}')
+            return self.end_early(Outcome.BAD_GOAL, f'bad request: {e}')
         except CanceledError:
             reason = 'canceled' if not self.stopping.is_set() else 'canceled: the server is stopping'
             self.c.logger.info(reason)
@@ -86,7 +86,9 @@ class RequestPath:
 
     inactive_reason = 'not active: the server is not in the active lifecycle state'
 
-    def refuse(self, outcome: Outcome, message: str, throttle: bool = False) -> Localize.Result:
+    def end_early(self, outcome: Outcome, message: str, throttle: bool = False) -> Localize.Result:
+        """End the request before (or instead of) a localization result: refused at once
+        (inactive, busy, bad), or after waiting (no scan, no map, an unusable scan)."""
         # two call sites: rclpy refuses one call site logged with and without a throttle
         if throttle:
             self.c.logger.warn(f'refused: {message}', throttle_duration_sec=5.0)
@@ -99,11 +101,11 @@ class RequestPath:
         start = time.monotonic()
         maps = self.c.maps.wait_current(request.scan_timeout_s, cancelled)   # a newer map may be building
         if maps.built is None or not self.c.maps.is_current(maps.generation):
-            return self.refuse(Outcome.NO_MAP, maps.error or 'a newer map is still being prepared; retry')
+            return self.end_early(Outcome.NO_MAP, maps.error or 'a newer map is still being prepared; retry')
         localizer = maps.built.reconfigured(self.c.config().localizer)
         newest = self.wait_for_view(request, start, cancelled, feedback)
         if newest is None:
-            return self.refuse(Outcome.NO_SCAN, f'no {self.wanted()} within {seconds(request.scan_timeout_s)} s')
+            return self.end_early(Outcome.NO_SCAN, f'no {self.wanted()} within {seconds(request.scan_timeout_s)} s')
         try:
             view, messages = make_view(self.c.sensors, newest, start, self.c.mount, self.c.odometry,
                                        self.c.config().view)
@@ -111,9 +113,9 @@ class RequestPath:
             result = localizer.localize_points(view.points, request.method, request.angle_step_deg, self.progress(
                 cancelled, feedback), base_T_laser=view.base_T_laser, region=request.region)
         except ScanError as e:      # ViewError, MountError, NoMounting are ScanErrors
-            return self.refuse(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
+            return self.end_early(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
         except BudgetError as e:    # the goal asks for more work than a goal may do
-            return self.refuse(Outcome.BAD_GOAL, f'bad request: {e}')
+            return self.end_early(Outcome.BAD_GOAL, f'bad request: {e}')
         reference = max(messages.values(), key=lambda m: stamp_seconds(m.header.stamp))
         shown = (view.points, view.base_T_laser, reference)
         if result.outcome == Outcome.AMBIGUOUS and request.resolve_by_motion_s > 0:
@@ -151,10 +153,10 @@ class RequestPath:
     def wait_for_view(self, request: Request, start: float, cancelled, feedback):
         self.c.logger.info(f'localizing ({request.origin}): method {request.method}, waiting up to '
                            f'{seconds(request.scan_timeout_s)} s for a {self.wanted()}')
-        feedback(0.0, 'waiting_for_scan', 0.0)
+        feedback(0.0, Stage.WAITING_FOR_SCAN, 0.0)
         newest = self.c.sensors.wait(start, request.scan_timeout_s, self.c.config().view.merge_window_s, cancelled)
         if newest is not None:
-            feedback(0.05, 'preparing_scan', 0.0)   # local map or points, per method
+            feedback(0.05, Stage.PREPARING_SCAN, 0.0)   # local map or points, per method
         return newest
 
     def log_view(self, view, messages: dict) -> None:
@@ -174,7 +176,7 @@ class RequestPath:
                 raise CanceledError()
             if time.monotonic() - last[0] > 0.1 or fraction >= 1.0:
                 last[0] = time.monotonic()
-                feedback(0.05 + 0.9 * fraction, 'matching', best)
+                feedback(0.05 + 0.9 * fraction, Stage.MATCHING, best)
         return report
 
     # ---- publish ------------------------------------------------------------------------
@@ -194,7 +196,7 @@ class RequestPath:
             summary += f': {format_pose(result.pose)}, score {result.score:.3f}, {result.time_s:.2f} s'
             wanted = request.publish and (result.success or request.publish_if_ambiguous)
             if wanted and not self.c.maps.is_current(generation):
-                return self.refuse(Outcome.NO_MAP, f'not published: a newer map arrived while localizing in map '
+                return self.end_early(Outcome.NO_MAP, f'not published: a newer map arrived while localizing in map '
                                                    f'{generation} (its pose would be in the old map); retry')
             if wanted:
                 self.c.publish_pose(out.pose)
