@@ -54,13 +54,12 @@ def test_branch_and_bound_finds_the_brute_force_maximum_and_every_pose_near_it(s
     scores = brute_force_leaves(matcher, pts, 2 * math.pi / search.angles, search.angles)
     assert search.best_leaf == pytest.approx(scores.max(), abs=1e-12)
     # every leaf within the band searched at the best's fit was found (the hypotheses come from them):
-    # the band a confident answer needs (a good fit: narrower than keep_ratio's), or keep_ratio's
-    # when a place below it could have refined to within the best's lead (widened)
+    # at this good fit the band a confident answer needs, narrower than keep_ratio's
     raw = np.rint(scores * 255 * len(pts))
     opt = matcher.options
     keep = searched_keep(raw.max() / (255 * len(pts)), opt.keep_ratio, opt.min_confidence, opt.band_allowance)
     assert keep > opt.keep_ratio
-    assert search.leaves == np.count_nonzero(raw >= math.ceil((opt.keep_ratio if search.widened else keep) * raw.max()))
+    assert search.leaves == np.count_nonzero(raw >= math.ceil(keep * raw.max()))
 
 
 def test_bounds_are_never_below_the_leaves_under_them():

@@ -13,7 +13,7 @@ from global_loc.core.matchers import MatchOptions, make_matcher
 from global_loc.core.matchers.base import Candidate
 from global_loc.core.matchers.bnb import BranchAndBoundMatcher, BranchAndBoundOptions
 from global_loc.core.matchers.bnb.kernels import SearchSpace
-from global_loc.core.matchers.bnb.verdict import band_covers, judge, keep_floor, searched_keep
+from global_loc.core.matchers.bnb.verdict import judge, keep_floor, searched_keep
 from global_loc.core.outcome import Outcome
 from global_loc.core.scan import scan_to_points
 from global_loc.core.transform import Rigid2D
@@ -132,31 +132,24 @@ def test_a_confident_answer_whose_runner_up_lies_outside_the_band_says_its_confi
 
 @pytest.mark.parametrize('seed', range(3))
 def test_the_verdict_on_the_band_has_the_outcome_of_the_verdict_on_the_whole_keep_ratio_band(seed):
-    """Random hypotheses (fits and see-through shares; here a leaf scores its refined fit):
+    """Random hypotheses whose leaves score their refined fit and whose beams pass no wall:
     judged as the whole 10% band saw them (band_allowance 1) and as the band set from the
-    best leaf's fit sees them - only the places within it, or all of them when band_covers
-    says a place below it could matter (the search runs again with keep_ratio's band) -
-    the same outcome and, but for a confident answer's floor, the same confidence."""
+    best leaf's fit sees them (only the places within it), the same outcome and, but for
+    a confident answer's floor, the same confidence. (With see-through, or leaves other
+    than their refined fits, it is measured, not proven: benchmarks/READING.md.)"""
     rng = np.random.default_rng(seed)
-    whole = BranchAndBoundOptions(band_allowance=1.0)
+    whole, tightest = BranchAndBoundOptions(band_allowance=1.0), BranchAndBoundOptions(band_allowance=0.0)
     n_points = 200
-    space = SearchSpace(1, 1, 1, OPTIONS.keep_ratio, OPTIONS.min_confidence, OPTIONS.band_allowance, 0, 0, -1, 0, -1)
-    widened = 0
+    space = SearchSpace(1, 1, 1, OPTIONS.keep_ratio, OPTIONS.min_confidence, 0.0, 0, 0, -1, 0, -1)
     for _ in range(3000):
         best_raw = int(rng.integers(0.3 * 255 * n_points, 255 * n_points))
         raw = np.concatenate([[best_raw], np.floor(best_raw * rng.uniform(0.9, 1.0, rng.integers(0, 6)))])
-        fits = raw / (255 * n_points)
-        through = np.where(rng.random(len(fits)) < 0.3, rng.uniform(0, 0.2, len(fits)), 0.0)
-        cands = sorted([place(i, f, t) for i, (f, t) in enumerate(zip(fits, through, strict=True))],
-                       key=lambda c: -c.score)
-        floor = keep_floor(space, best_raw, n_points) / (255 * n_points)
+        cands = sorted([place(i, f) for i, f in enumerate(raw / (255 * n_points))], key=lambda c: -c.score)
+        floor = keep_floor(space, best_raw, n_points) / (255 * n_points)     # no allowance: the tightest band
         seen = [c for c in cands if c.explained >= floor]
-        if not band_covers(seen, best_raw, n_points, space, OPTIONS.refine_rise):
-            seen, widened = cands, widened + 1
-        before, after = judge(cands, whole), judge(seen, OPTIONS)
+        before, after = judge(cands, whole), judge(seen, tightest)
         assert after.outcome == before.outcome, (cands, seen, before, after)
         if after.message.startswith('localized: confidence at least'):
             assert before.confidence >= OPTIONS.min_confidence
         else:
             assert after.confidence == pytest.approx(before.confidence) and after.message == before.message
-    assert 0 < widened < 1500

@@ -12,7 +12,10 @@ from collections import defaultdict
 
 import numpy as np
 
+from global_loc.core.matchers.base import Candidate
 from global_loc.core.matchers.bnb.options import BranchAndBoundOptions
+from global_loc.core.matchers.bnb.verdict import judge, searched_keep
+from global_loc.core.transform import Rigid2D
 
 OPT = BranchAndBoundOptions()
 
@@ -42,6 +45,20 @@ def needed_allowance(row: dict):
               or (rank[i] is not None and rank[i] >= (1 - need) * r0)]
     gap = max(1 - leaf[i] / l_max for i in matter)
     return gap - need_at(l_max), len(matter) - 1
+
+
+def replayed_outcomes(row: dict, allowance: float):
+    """The verdict an A row's hypotheses get under the whole keep_ratio band, and the one
+    they would get from the band with this allowance (the places whose leaf lies within
+    it: the search returns exactly those, its leaves an upper set of the whole band's)."""
+    leaf_of = dict(zip(row['peak_fit'], row['peak_leaf'], strict=True))
+    cands = [Candidate(Rigid2D(float(i), 0.0, 0.0), rank, explained=fit, see_through=1 - rank / fit if fit else 0.0)
+             for i, (rank, fit) in enumerate(row['candidates'])]
+    best_leaf = max(row['peak_leaf'])
+    keep = searched_keep(best_leaf, OPT.keep_ratio, OPT.min_confidence, allowance)
+    seen = [c for c in cands if leaf_of[c.explained] >= keep * best_leaf]
+    return (judge(cands, BranchAndBoundOptions(band_allowance=1.0)).outcome,
+            judge(seen, BranchAndBoundOptions(band_allowance=allowance)).outcome)
 
 
 def pct(values, q):
@@ -94,6 +111,12 @@ def main(paths) -> int:
     for n, k, r in sorted(needed, key=lambda t: -t[0])[:6]:
         print(f'  needs {n:+.4f}: {r["suite"]} {r["map"]} trial {r["trial"]} {r["outcome"]} rivals {k} '
               f'leaf {[round(x, 3) for x in r["peak_leaf"][:4]]} fit {[round(x, 3) for x in r["peak_fit"][:4]]}')
+    replayable = [r for r in a_rows if r['candidates'] and len(r['peak_fit']) == len(r['peak_leaf'])]
+    for allowance in (0.0, 0.01, 0.02, 0.03, 0.04):
+        flips = [(r['suite'], r['map'], r['trial'], *(o.label for o in replayed_outcomes(r, allowance)), r['ok'])
+                 for r in replayable]
+        flips = [f for f in flips if f[3] != f[4]]
+        print(f'replayed at band_allowance {allowance}: {len(flips)} of {len(replayable)} outcomes change {flips[:4]}')
     # time per suite and map
     print('| suite | map / log | n | A median | A p95 | B median | B p95 | A expansions (median) | B |')
     groups = defaultdict(lambda: defaultdict(list))

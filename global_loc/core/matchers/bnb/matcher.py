@@ -38,7 +38,7 @@ from .options import BranchAndBoundOptions
 from .refine import bin_maxima, landscape_covariance, refine
 from .refine import warm_up as warm_up_refine
 from .search import SearchStats, ThreadedSearch, search_threads
-from .verdict import band_covers, judge
+from .verdict import judge
 
 
 def warm_up() -> None:
@@ -119,19 +119,14 @@ class BranchAndBoundMatcher(Matcher):
         tu, tv, ta = tu[keep], tv[keep], ta[keep]
         if len(tu) == 0:
             return Match([])
-        # 2. Branch and bound down to the band below the best leaf (verdict.searched_keep);
-        # 3. peaks, refined, checked for free space, ranked.
+        # 2. Branch and bound down to the band below the best leaf (verdict.searched_keep).
         tables = self.tables(pts, d0, n_angles)
-        top_nodes = np.stack([tu, tv, ta, node_bounds(self.stack.planes, tables, tu, tv, ta, top)], axis=1)
-        run = self.search_and_rank(space, tables, top_nodes.astype(np.int64), pts, d0, points, progress, deadline)
-        leaves, per_level, exact, candidates, search_s = run
-        widened = exact and not band_covers(candidates, int(leaves[:, 3].max(initial=0)), len(pts), space,
-                                            opt.refine_rise)
-        if widened:     # a place below the band could refine to within the best's lead: keep_ratio's band
-            leaves, more, exact, candidates, again_s = self.search_and_rank(
-                space._replace(band_allowance=1.0), tables, top_nodes.astype(np.int64), pts, d0, points, progress,
-                deadline)
-            per_level, search_s = per_level + more, search_s + again_s
+        search_start = time.perf_counter()
+        bounds = node_bounds(self.stack.planes, tables, tu, tv, ta, top)
+        leaves, per_level, exact = self.searcher.run(
+            self.stack.planes, tables, self.stack.free, space,
+            np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, opt.max_nodes, progress, deadline)
+        search_s = time.perf_counter() - search_start
         scores = leaves[:, 3] / (255.0 * len(pts))
         expansions = int(per_level.sum())
         stopped = '' if exact else (f'stopped after {expansions} node expansions' if expansions >= opt.max_nodes
@@ -139,22 +134,12 @@ class BranchAndBoundMatcher(Matcher):
         stats = SearchStats(exact=exact, angles=n_angles, points=len(pts), leaves=len(scores),
                             expansions=expansions, per_level=tuple(per_level.tolist()), top_nodes=len(tu),
                             threads=search_threads(), best_leaf=float(scores.max()) if len(scores) else 0.0,
-                            search_s=search_s, widened=widened)
+                            search_s=search_s)
+        # 3. Peaks, refined, checked for free space, ranked.
+        candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], scores, pts, d0, points)
         if progress:
             progress(1.0, candidates[0].score if candidates else 0.0)
         return Match(candidates, stats, stopped)
-
-    def search_and_rank(self, space, tables, top_nodes, pts, d0, points, progress, deadline):
-        """One search in `space`'s band and its ranked hypotheses: (leaves, expansions per
-        level, exact, candidates, seconds in the search proper)."""
-        search_start = time.perf_counter()
-        leaves, per_level, exact = self.searcher.run(self.stack.planes, tables, self.stack.free, space, top_nodes,
-                                                     self.options.levels - 1, self.options.max_nodes, progress,
-                                                     deadline)
-        search_s = time.perf_counter() - search_start
-        scores = leaves[:, 3] / (255.0 * len(pts))
-        candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], scores, pts, d0, points)
-        return leaves, per_level, exact, candidates, search_s
 
     def fit_at(self, points: ScanPoints, laser_pose: Rigid2D) -> tuple[float, float, Rigid2D]:
         """How well the map explains the scan at a laser pose, refined within about a cell

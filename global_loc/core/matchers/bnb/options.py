@@ -25,9 +25,6 @@ class BranchAndBoundOptions:
                                            '(leaves are scored at cell centres): the search looks within the lead '
                                            'a confident answer needs plus this (verdict.searched_keep); 1 - '
                                            'keep_ratio or more: the whole keep_ratio band')
-    refine_rise: float = _option(0.02, "the most a place's refined field score exceeds its leaf's (measured): a "
-                                       'search whose band could hide a place that refines to within the lead of '
-                                       "its best searches again with keep_ratio's band (verdict.band_covers)")
     max_nodes: int = _option(400000, 'node expansions after which the search stops and says it was not exhaustive')
     hypotheses: int = _option(HYPOTHESES, 'distinct poses refined, judged and returned')
     distinct_m: float = _option(DISTINCT_M, 'm; poses closer than this (and distinct_angle) are one hypothesis: '
@@ -44,9 +41,8 @@ class BranchAndBoundOptions:
             raise ValueError(f'bnb min_confidence must be in (0, 1], got {self.min_confidence}')
         if not 0 < self.keep_ratio < 1:
             raise ValueError(f'bnb keep_ratio must be in (0, 1), got {self.keep_ratio}')
-        if not (0 <= self.band_allowance <= 1 and 0 <= self.refine_rise <= 1):
-            raise ValueError(f'bnb band_allowance and refine_rise must be in [0, 1], got {self.band_allowance}, '
-                             f'{self.refine_rise}')
+        if not 0 <= self.band_allowance <= 1:
+            raise ValueError(f'bnb band_allowance must be in [0, 1], got {self.band_allowance}')
         if not (self.hypotheses >= 1 and self.distinct_m > 0 and self.distinct_angle > 0):
             raise ValueError(f'bnb hypotheses must be >= 1 and distinct_m, distinct_angle > 0, got '
                              f'{self.hypotheses}, {self.distinct_m}, {self.distinct_angle}')

@@ -39,7 +39,6 @@ class SearchStats:
     best_leaf: float       # the best leaf's score, in [0, 1]
     search_s: float = 0.0  # seconds in the search proper (the tree), not in preparing the scan's
                            # tables or refining, checking and ranking the peaks
-    widened: bool = False  # searched again with keep_ratio's band (verdict.band_covers was false)
 
 
 def search_threads() -> int:

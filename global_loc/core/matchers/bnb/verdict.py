@@ -39,27 +39,6 @@ def keep_floor(space, best, n_points):
     return np.int64(math.ceil(searched_keep(fit, space.keep_ratio, space.min_confidence, space.band_allowance) * best))
 
 
-def band_covers(candidates: list[Candidate], best_raw: int, n_points: int, space, refine_rise: float) -> bool:
-    """Whether the band searched below the best leaf (raw score best_raw; space: the
-    search's kernels.SearchSpace) holds every place that can change the verdict. A place
-    below the band refines to at most its floor + refine_rise (the refinement's largest
-    rise, measured); it can change nothing when that is more than the lead a confident
-    answer needs behind the best's ranking score (which is at most its field score, so
-    it can neither outrank the best nor come within the lead in either score). Always
-    true where the band is keep_ratio's: there is nothing wider to search."""
-    fit = best_raw / (255.0 * max(n_points, 1))
-    if not candidates or searched_keep(fit, space.keep_ratio, space.min_confidence,
-                                       space.band_allowance) <= space.keep_ratio:
-        return True
-    best = candidates[0]
-    explained = min(max((best.explained - 0.3) / 0.3, 0.0), 1.0)
-    if explained <= 0:
-        return False
-    need = space.min_confidence * (1.0 - space.keep_ratio) / explained
-    floor = keep_floor(space, best_raw, n_points) / (255.0 * max(n_points, 1))
-    return floor + refine_rise < (1.0 - need) * best.score
-
-
 def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdict:
     """The candidates are the distinct hypotheses, best first by ranking score (field
     score x (1 - see-through share)), each with its field score (`explained`).
