@@ -112,7 +112,8 @@ class BagMount3D:
 
     def as_dict(self) -> dict:
         return {'from': self.source, 'frames': self.chain,
-                **dict(zip(('x', 'y', 'z', 'roll', 'pitch', 'yaw'), (round(v, 6) for v in self.mount.as_tuple())))}
+                **dict(zip(('x', 'y', 'z', 'roll', 'pitch', 'yaw'), (round(v, 6) for v in self.mount.as_tuple()),
+                           strict=True))}
 
 
 def read_mountings(path: str, topics: dict, base_frame: str) -> dict:

@@ -23,6 +23,7 @@ from .core.outcome import Outcome
 from .core.paths import default_map_yaml
 from .core.scan import Scan, ScanError, scan_to_points
 from .core.transform import Rigid2D, pose_error
+from .core.view import ViewConfig
 from .sim.raycast import sample_free_poses, simulate_scan
 
 
@@ -91,19 +92,52 @@ def laser_mounting(args) -> tuple[LaserMount, dict]:
                          **({'upside_down': True} if found.mount.upside_down else {})}
 
 
+def result_fields(result) -> dict:
+    """A localization's fields of its output line (the pose, the outcome, what bnb's search did)."""
+    out = {} if result.pose is None else result.pose.as_dict()
+    out.update(outcome=result.outcome.label, score=round(result.score, 5) if math.isfinite(result.score) else None,
+               success=result.success, confidence=round(result.confidence, 4),
+               time_s=round(result.time_s, 4), message=result.message,
+               hypotheses=[{**h.pose.as_dict(), 'score': round(h.score, 5)} for h in result.hypotheses])
+    stats = result.search_stats
+    if getattr(stats, 'search_s', None) is not None:     # bnb: what its search did, to tell why one was slow
+        out['search'] = {'expansions': stats.expansions, 'headings': stats.angles, 'points': stats.points,
+                         'search_s': round(stats.search_s, 4), 'exact': stats.exact}
+    return out
+
+
+def several_sensors(args) -> bool:
+    """Whether the command line merges several sensors (more than one --topic, or a --cloud-topic)."""
+    args.topic = args.topic or ([] if args.cloud_topic else ['/scan'])
+    several = len(args.topic) > 1 or bool(args.cloud_topic) or bool(args.mount)
+    if (several or args.merge_window is not None) and not args.bag:
+        raise ValueError('several --topic values, --cloud-topic, --mount and --merge-window read a --bag')
+    if several and (args.follow or args.plot):
+        raise ValueError('--follow and --plot take one laser: a single --topic without --cloud-topic or --mount')
+    if args.merge_window is None:
+        args.merge_window = ViewConfig.merge_window_s
+    if not several:
+        args.topic = args.topic[0]
+    return several
+
+
 def localize_main(args) -> int:
+    several = several_sensors(args)
     if args.carmen and not args.map:
         from .offline_follow import carmen_map
         occupancy_map = carmen_map(args.carmen)
     else:
         occupancy_map = load_map_yaml(args.map or default_map_yaml())
     bnb = BranchAndBoundOptions(**{name: getattr(args, f'bnb_{name}') for name, *_ in option_fields()})
-    mount, mounting = laser_mounting(args)
+    mount, mounting = (LaserMount(Rigid2D()), None) if several else laser_mounting(args)
     base_T_laser = mount.base_T_laser
     config = LocalizerConfig(method=args.method, angle_step_deg=args.angle_step, closing_kernel=args.closing_kernel,
                              bnb=bnb, max_search_s=args.max_search_s, base_T_laser=base_T_laser)
     localizer = Localizer(occupancy_map, config)
     method = localizer.matcher(args.method).name   # unknown method: fail before reading any scan
+    if several:
+        from .offline_view import localize_views
+        return localize_views(args, localizer, method, result_fields)
     if args.follow:
         if mount.upside_down:
             raise ValueError("--follow: the bag's tf mounts the laser upside down; only --bag without --follow "
@@ -126,17 +160,7 @@ def localize_main(args) -> int:
         except ScanError as e:
             print(json.dumps({**out, 'outcome': Outcome.UNUSABLE_SCAN.label, 'error': str(e)}), flush=True)
             continue
-        if result.pose is not None:
-            out.update(result.pose.as_dict())
-        out.update(outcome=result.outcome.label,
-                   score=round(result.score, 5) if math.isfinite(result.score) else None,
-                   success=result.success, confidence=round(result.confidence, 4),
-                   time_s=round(result.time_s, 4), message=result.message,
-                   hypotheses=[{**h.pose.as_dict(), 'score': round(h.score, 5)} for h in result.hypotheses])
-        stats = result.search_stats
-        if getattr(stats, 'search_s', None) is not None:     # bnb: what its search did, to tell why one was slow
-            out['search'] = {'expansions': stats.expansions, 'headings': stats.angles, 'points': stats.points,
-                             'search_s': round(stats.search_s, 4), 'exact': stats.exact}
+        out.update(result_fields(result))
         if truth is not None and result.pose is not None:
             d, a = pose_error(result.pose, truth)
             out.update(truth=truth.as_dict(), error_xy=round(d, 4), error_yaw_deg=round(a, 3))
@@ -163,6 +187,20 @@ def simulate_main(args) -> int:
     return 0
 
 
+def add_sensor_arguments(loc: argparse.ArgumentParser) -> None:
+    """--bag's sensors: the topics, and for several, their mountings and the merge window."""
+    loc.add_argument('--topic', action='append', help='with --bag: a LaserScan topic (default /scan); given again, '
+                                                       'the lasers are merged into one view as the server does, '
+                                                       'for each message of the first')
+    loc.add_argument('--cloud-topic', action='append', help='with --bag: a PointCloud2 topic merged into the view')
+    loc.add_argument('--mount', nargs=7, action='append', metavar=('TOPIC', 'X', 'Y', 'Z', 'ROLL', 'PITCH', 'YAW'),
+                     help="with --bag: a sensor's mounting on the base (m, rad) when the bag's tf does not have "
+                          'its frame')
+    loc.add_argument('--merge-window', type=float, default=None,
+                     help='with several sensors: a sensor whose newest message is older than the newest one by '
+                          f'more, s, is left out (default {ViewConfig.merge_window_s})')
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog='python -m global_loc', description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest='command', required=True)
@@ -174,7 +212,7 @@ def build_parser() -> argparse.ArgumentParser:
     source.add_argument('--bag', help='rosbag2 recording (directory; sqlite3 or mcap) to read LaserScans from')
     source.add_argument('--carmen', help='CARMEN log (.log or .log.gz): its FLASER scans, truth from the corrected '
                                          'poses, odometry from the ODOM lines')
-    loc.add_argument('--topic', default='/scan', help='with --bag: the LaserScan topic (default /scan)')
+    add_sensor_arguments(loc)
     loc.add_argument('--base-frame', default='base_link',
                      help="with --bag: the robot base's frame; the laser's mounting on it is read from the bag's "
                           '/tf_static and fixed /tf transforms (default base_link)')
@@ -189,7 +227,9 @@ def build_parser() -> argparse.ArgumentParser:
                           'next scans with the recorded odometry, as the server resolves by motion')
     loc.add_argument('--follow-s', type=float, default=30.0,
                      help='with --follow: seconds of recording to follow for at most (default 30)')
-    loc.add_argument('--odom-topic', default='/odom', help='with --bag --follow: the nav_msgs/Odometry topic')
+    loc.add_argument('--odom-topic', default='/odom', help='with --bag --follow, or several sensors: the '
+                                                           'nav_msgs/Odometry topic (several sensors: used when '
+                                                           'present, to move each reading to the view\'s stamp)')
     loc.add_argument('--method', default=LocalizerConfig.method, help=f'one of: {", ".join(method_names())}')
     loc.add_argument('--angle-step', type=float, default=LocalizerConfig.angle_step_deg, help='Δα, degrees')
     loc.add_argument('--max-search-s', type=float, default=math.inf,

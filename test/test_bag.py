@@ -171,7 +171,7 @@ def test_bag_without_the_transform_uses_the_mounting_flags_and_says_so(tmp_path,
     write_mounted_bag(tmp_path / 'tf', office_map)
     out = run_cli('--bag', str(tmp_path / 'tf'), '--base-frame', 'base_footprint', '--every', '3', *flags)
     row = json.loads(out.stdout.splitlines()[0])
-    assert row['mounting']['because'].endswith('no chain of fixed transforms from base_footprint to the laser frame '
+    assert row['mounting']['because'].endswith('no chain of fixed transforms from base_footprint to the sensor frame '
                                                'rplidar_link on /tf_static or /tf (odom -> base_link on /tf move '
                                                'during the recording)'), row['mounting']
     assert_base_poses([row], POSES[:1])
