@@ -12,9 +12,10 @@ between neighbouring angles). A node at level h covers 2^h x 2^h cells and 2^h a
 its bound reads the scan, rotated to the node's middle angle, from planes whose cells
 hold the field's maximum over the block, widened by the rotation's reach for each
 point's own range (grids.py). A bound is never below any leaf under it, so the search,
-expanding best bound first down to keep_ratio x the best leaf (search.py), is exact at
-cell and d0 resolution and finds every pose scoring that high: the hypotheses, and the
-margin behind the confidence. The laser must stand on a free cell of the map.
+expanding best bound first down to the band below the best leaf that the verdict needs
+(verdict.searched_keep; search.py), is exact at cell and d0 resolution and finds every
+pose scoring that high: the hypotheses, and the margin behind the confidence. The laser
+must stand on a free cell of the map.
 """
 from __future__ import annotations
 

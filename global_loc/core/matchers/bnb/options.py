@@ -19,8 +19,9 @@ class BranchAndBoundOptions:
     max_points: int = _option(240, 'scan points kept after the one-cell voxel filter')
     max_range: float = _option(30.0, 'm; farther returns are left out (the angle step shrinks with the '
                                      'largest range, and far returns are the least sure)')
-    keep_ratio: float = _option(0.9, 'nodes bounded above keep_ratio x the best score are explored: every '
-                                     'pose scoring that high is found (the hypotheses, the margin)')
+    keep_ratio: float = _option(0.9, 'the widest band searched: nodes bounded above keep_ratio x the best '
+                                     'score are explored where the fit is too poor for a narrower band '
+                                     '(see band_allowance); confidence is the margin over 1 - keep_ratio')
     band_allowance: float = _option(0.03, 'how much farther behind the best a leaf may lie than its refined score '
                                            '(leaves are scored at cell centres): the search looks within the lead '
                                            'a confident answer needs plus this (verdict.searched_keep); 1 - '
