@@ -147,3 +147,24 @@ def test_a_fault_scenario_runs_against_real_processes_and_writes_its_table(tmp_p
     assert rows[0]['answered'] == rows[0]['goals'] > 0 and rows[0]['wrong_poses'] == 0 and rows[0]['hangs'] == 0
     assert rows[0]['recovery_s'] is not None, rows[0]
     assert '| laser_late | 1 |' in (tmp_path / 'REPORT.md').read_text()
+
+
+def test_the_sensors_table_is_built_from_rows_per_setup_in_order_with_its_plot(tmp_path):
+    from global_loc.bench.sensors import SETUPS, sensors_section
+    from global_loc.bench.summary import summary_section
+
+    def row(setup, ok, success, t, points=300, map_name='office'):
+        return {'suite': 'sensors', 'map': map_name, 'sensors': setup, 'method': 'bnb', 'ok': ok, 'ok_loose': ok,
+                'success': success, 'time_s': t, 'view_points': points, 'angle_step': 5}
+    rows = [row('3D lidar', True, True, 0.02, 400), row('3D lidar', True, True, 0.04, 500),
+            row('front 180°', False, True, 0.3), row('front 180°', False, False, 0.1),
+            row('front + rear 2 × 270°', True, True, 0.01, map_name='willow')]
+    lines = sensors_section(rows, str(tmp_path))
+    table = [line for line in lines if line.startswith('| bnb |')]
+    # setups in SETUPS' order, pooled over maps, then per map
+    assert [line.split(' | ')[1] for line in table[:3]] == [SETUPS[0], SETUPS[2], SETUPS[3]]
+    assert table[0] == '| bnb | front 180° | 2 | 300 | 0% | 50% | 50% | 0.200 | 0.290 |', table[0]
+    assert table[2] == '| bnb | 3D lidar | 2 | 450 | 100% | 100% | 0% | 0.030 | 0.039 |', table[2]
+    assert '| bnb | willow: front + rear 2 × 270° | 1 | 300 | 100% | 100% | 0% | 0.010 | 0.010 |' in table
+    assert (tmp_path / 'sensors.png').stat().st_size > 5000
+    assert any(line.startswith('| sensors |') and '| 5 | 60% | 20% |' in line for line in summary_section(rows))

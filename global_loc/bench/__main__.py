@@ -27,6 +27,7 @@ from .follow import follow_rows
 from .relocalization import relocalization_rows
 from .report import BASELINE, write_report
 from .scaling import SIZES, scaling_rows
+from .sensors import sensors_trials
 from .soak import soak_rows, soak_summary
 from .suites import (
     ANGLE_STEP_METHODS,
@@ -74,7 +75,8 @@ def parse_args(argv):
     parser.add_argument('--quick', action='store_true', help='few poses and maps: a few minutes')
     parser.add_argument('--suites', default='cut,sim,carmen,prior,relocalization,scaling',
                         help='comma-separated: cut, sim, carmen, prior, relocalization, scaling; and changed (a '
-                             'world changed since its map, three levels), soak (the real server and simulator '
+                             'world changed since its map, three levels), sensors (front 180/270 deg, front + '
+                             'rear, the 3D lidar: bench/sensors.py), soak (the real server and simulator '
                              'under faults), faults (runtime changes: bench/faults.py) and follow (resolution by '
                              'motion on the real logs), not in the default set')
     parser.add_argument('--soak-goals', type=int, default=0, help='goals of the soak suite (default 1000, quick 40)')
@@ -111,6 +113,9 @@ def build_trials(args, suites, maps, poses, notes) -> tuple[list, list, dict]:
     if 'changed' in suites:
         print('ray-casting scans in changed worlds ...', file=sys.stderr)
         trials += changed_trials(maps, poses, args.seed)
+    if 'sensors' in suites:
+        print('simulating lasers and the 3D lidar for the sensors suite ...', file=sys.stderr)
+        trials += sensors_trials(maps, poses, args.seed)
     carmen, carmen_maps = [], {}
     if 'carmen' in suites or 'relocalization' in suites:
         print('building held-out maps from the CARMEN logs ...', file=sys.stderr)

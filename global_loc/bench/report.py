@@ -16,6 +16,7 @@ from ..plot import plot_localization  # noqa: E402
 from .changed import changed_section  # noqa: E402
 from .follow import follow_section  # noqa: E402
 from .sections import faults_section, prior_section, scaling_section, soak_section  # noqa: E402
+from .sensors import sensors_section  # noqa: E402
 from .summary import summary_section  # noqa: E402
 from .tables import BASELINE, group, pct, save_figure, secs, stats  # noqa: E402
 
@@ -153,6 +154,8 @@ def write_report(rows, meta, out, maps, trials) -> None:
         md += prior_section(by_suite['prior'], out)
     if 'changed' in by_suite:
         md += changed_section(by_suite['changed'], out)
+    if 'sensors' in by_suite:
+        md += sensors_section(by_suite['sensors'], out, plots)
     if meta.get('relocalization'):
         md += relocalization_section(meta['relocalization'])
     if meta.get('follow'):
@@ -281,7 +284,8 @@ def plot_carmen(rows, methods, out):
 
 def failure_pictures(rows, trials, maps, out, count=2) -> list[str]:
     """Pictures of typical failures of the baseline: wrong and marked successful first."""
-    wrong = [r for r in rows if r['method'] == BASELINE and not r['ok'] and 'estimate' in r and r['suite'] != 'cut']
+    wrong = [r for r in rows if r['method'] == BASELINE and not r['ok'] and 'estimate' in r
+             and r['suite'] not in ('cut', 'sensors')]     # their trials are points, not scans to draw
     wrong.sort(key=lambda r: (not r['success'], r['suite'], r['trial']))
     md = [f'## Typical failures of the thesis baseline ({BASELINE})', ''] if wrong else []
     for i, r in enumerate(wrong[:count]):

@@ -25,7 +25,7 @@ def run_job(job):
     step = trial.condition.get('angle_step', 5)
     try:
         if trial.points is not None:
-            res = loc.localize_points(trial.points, method, step)
+            res = loc.localize_points(trial.points, method, step, base_T_laser=trial.base_T_laser)
         else:
             res = loc.localize(trial.scan, method, step, base_T_laser=trial.base_T_laser, region=trial.region)
     except Exception as e:   # a failure of a method on one trial is a data point, not a crash
