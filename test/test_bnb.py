@@ -42,12 +42,14 @@ def test_branch_and_bound_finds_the_brute_force_maximum_and_every_pose_near_it(s
     rng = np.random.default_rng(seed)
     truth = sample_free_poses(m, 1, rng, clearance=0.3)[0]
     scan = simulate_scan(m, truth, 270.0, 271, 4.0, noise_std=0.01, rng=rng)
-    matcher = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=4), slice_expansions=slice_expansions)
+    # the narrow band (band_allowance 0.03: the default's whole keep_ratio band is the same search, wider)
+    options = BranchAndBoundOptions(levels=4, band_allowance=0.03)
+    matcher = BranchAndBoundMatcher(m, options, slice_expansions=slice_expansions)
     found = matcher.match(scan_to_points(scan), MatchOptions())
     search = found.stats
     assert search.exact and search.threads == threads
     opencv_threads(1)
-    alone = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=4)).match(scan_to_points(scan), MatchOptions())
+    alone = BranchAndBoundMatcher(m, options).match(scan_to_points(scan), MatchOptions())
     assert [(c.laser_pose.as_tuple(), c.score) for c in found.candidates] == \
         [(c.laser_pose.as_tuple(), c.score) for c in alone.candidates]
     pts = matcher.prepare(scan_to_points(scan).points)
@@ -60,6 +62,8 @@ def test_branch_and_bound_finds_the_brute_force_maximum_and_every_pose_near_it(s
     keep = searched_keep(raw.max() / (255 * len(pts)), opt.keep_ratio, opt.min_confidence, opt.band_allowance)
     assert keep > opt.keep_ratio
     assert search.leaves == np.count_nonzero(raw >= math.ceil(keep * raw.max()))
+    whole = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=4)).match(scan_to_points(scan), MatchOptions())
+    assert whole.stats.leaves == np.count_nonzero(raw >= math.ceil(opt.keep_ratio * raw.max()))
 
 
 def test_bounds_are_never_below_the_leaves_under_them():

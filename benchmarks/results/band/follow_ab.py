@@ -1,6 +1,6 @@
 """The follow suite (resolution by motion on the CARMEN logs, bench/follow.py) A/B in one
 process: each start localized and followed twice on one Localizer - A with the whole
-keep_ratio band (band_allowance 1), B with the band the verdict needs (the default) -
+keep_ratio band (band_allowance 1), B with the band the verdict needs (--allowance) -
 rows to rows.jsonl with the variant.
 
     python benchmarks/results/band/follow_ab.py --starts 15 --out benchmarks/results/band/follow
@@ -24,7 +24,7 @@ from global_loc.offline_follow import Frame, follow_start
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 
 
-def log_rows(log: str, path: str, starts: int, seed: int, out) -> None:
+def log_rows(log: str, path: str, starts: int, seed: int, allowance: float, out) -> None:
     """bench.follow.log_rows' starts, each followed with A and B."""
     records = read_flaser(path)
     grid = LogGrid(records, 0.05)
@@ -44,7 +44,8 @@ def log_rows(log: str, path: str, starts: int, seed: int, out) -> None:
         loc = Localizer(m)
         matcher = loc.matcher('bnb')
         default = matcher.options
-        for variant, opts in (('A', replace(default, band_allowance=1.0)), ('B', default)):
+        for variant, opts in (('A', replace(default, band_allowance=1.0)), ('B', replace(default,
+                                                                                          band_allowance=allowance))):
             matcher.options = opts
             line = follow_start(loc, frames, int(i), FOLLOW_S, Rigid2D(), 'bnb')
             out.write(json.dumps({'variant': variant, 'log': log, 'index': line['index'],
@@ -59,6 +60,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser()
     p.add_argument('--starts', type=int, default=15, help='starts per log')
     p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--allowance', type=float, default=0.03, help="B's band_allowance")
     p.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'))
     p.add_argument('--out', default=os.path.join(os.path.dirname(os.path.abspath(__file__)), 'follow'))
     args = p.parse_args(argv)
@@ -67,7 +69,7 @@ def main(argv=None) -> int:
         for log in LOGS:
             path = os.path.join(args.shared, 'carmen', f'{log}-corrected.log.gz')
             if os.path.exists(path):
-                log_rows(log, path, args.starts, args.seed, out)
+                log_rows(log, path, args.starts, args.seed, args.allowance, out)
     return 0
 
 

@@ -19,13 +19,14 @@ class BranchAndBoundOptions:
     max_points: int = _option(240, 'scan points kept after the one-cell voxel filter')
     max_range: float = _option(30.0, 'm; farther returns are left out (the angle step shrinks with the '
                                      'largest range, and far returns are the least sure)')
-    keep_ratio: float = _option(0.9, 'the widest band searched: nodes bounded above keep_ratio x the best '
-                                     'score are explored where the fit is too poor for a narrower band '
-                                     '(see band_allowance); confidence is the margin over 1 - keep_ratio')
-    band_allowance: float = _option(0.03, 'how much farther behind the best a leaf may lie than its refined score '
-                                           '(leaves are scored at cell centres): the search looks within the lead '
-                                           'a confident answer needs plus this (verdict.searched_keep); 1 - '
-                                           'keep_ratio or more: the whole keep_ratio band')
+    keep_ratio: float = _option(0.9, 'nodes bounded above keep_ratio x the best score are explored: every '
+                                     'pose scoring that high is found (the hypotheses, the margin); the widest '
+                                     'band, which band_allowance may narrow')
+    band_allowance: float = _option(0.05, 'the search looks within the lead a confident answer needs (5% at a '
+                                           'full fit) plus this, at most keep_ratio\'s band (verdict.searched_keep): '
+                                           '0.05 or more (the default) is always the whole keep_ratio band; less is '
+                                           '15-20% faster but can change outcomes - a confident wrong answer '
+                                           'measured at 0.03 (benchmarks/READING.md)')
     max_nodes: int = _option(400000, 'node expansions after which the search stops and says it was not exhaustive')
     hypotheses: int = _option(HYPOTHESES, 'distinct poses refined, judged and returned')
     distinct_m: float = _option(DISTINCT_M, 'm; poses closer than this (and distinct_angle) are one hypothesis: '
