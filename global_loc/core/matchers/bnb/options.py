@@ -22,11 +22,11 @@ class BranchAndBoundOptions:
     keep_ratio: float = _option(0.9, 'nodes bounded above keep_ratio x the best score are explored: every '
                                      'pose scoring that high is found (the hypotheses, the margin); the widest '
                                      'band, which band_allowance may narrow')
-    band_allowance: float = _option(0.05, 'the search looks within the lead a confident answer needs (5% at a '
-                                           'full fit) plus this, at most keep_ratio\'s band (verdict.searched_keep): '
-                                           '0.05 or more (the default) is always the whole keep_ratio band; less is '
-                                           '15-20% faster but can change outcomes - a confident wrong answer '
-                                           'measured at 0.03 (benchmarks/READING.md)')
+    band_allowance: float = _option(1.0, 'the search looks within the lead a confident answer needs (5% at a '
+                                          'full fit) plus this, at most keep_ratio\'s band (verdict.searched_keep): '
+                                          '1 (the default) is always the whole keep_ratio band; at the other '
+                                          'defaults 0.03 is 13-20% faster but can change answers - one confident '
+                                          'wrong answer more on 150 real scans (benchmarks/READING.md)')
     max_nodes: int = _option(400000, 'node expansions after which the search stops and says it was not exhaustive')
     hypotheses: int = _option(HYPOTHESES, 'distinct poses refined, judged and returned')
     distinct_m: float = _option(DISTINCT_M, 'm; poses closer than this (and distinct_angle) are one hypothesis: '
