@@ -241,7 +241,7 @@ def build_parser() -> argparse.ArgumentParser:
     loc.add_argument('--plot', help='save a picture per scan (OUT.png, OUT_002.png, ...)')
     for name, kind, default, help_text in option_fields():
         loc.add_argument(f'--bnb-{name.replace("_", "-")}', dest=f'bnb_{name}', type=kind, default=default,
-                         help=f'bnb: {help_text} (default {default:g})')
+                         help=f'bnb: {help_text} (default {default:g})'.replace('%', '%%'))   # argparse formats help
     loc.set_defaults(func=localize_main)
     sim = sub.add_parser('simulate', help='ray-cast scans from random free poses (with their truth)')
     sim.add_argument('--map', default=default_map_yaml())

@@ -85,6 +85,10 @@ class FeatureMatcher(Matcher):
         src = np.float32([kps[m.queryIdx].pt for m in good]).reshape(-1, 2)
         dst = self.map_points[[m.trainIdx for m in good]].reshape(-1, 2)
         candidates = []
+        # RANSAC draws from OpenCV's per-thread RNG: seeded, the same scan gets the same
+        # answer whatever ran in this thread before (it did not: a test passed alone and
+        # failed after others)
+        cv2.setRNGSeed(0)
         while len(src) >= self.min_score and len(candidates) < self.max_hypotheses:
             affine, inliers = cv2.estimateAffinePartial2D(src, dst, method=cv2.RANSAC,
                                                           ransacReprojThreshold=3.0, maxIters=5000,
