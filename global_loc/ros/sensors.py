@@ -183,15 +183,18 @@ class SensorInputs:
         `window` s have followed it: topic -> (arrival, msg) of every sensor heard from
         (older ones too: `view` tells them apart). None when nothing arrived by since +
         timeout; CanceledError when `cancelled()` says so."""
+        first = None       # when the first message after `since` arrived (a sensor's newest keeps moving)
         with self.cond:
             while True:
                 fresh = [a for a, _ in self.newest.values() if a >= since]
                 now = self.clock()
-                if fresh and (len(fresh) == len(self.specs) or now >= min(fresh) + window):
+                if fresh and first is None:
+                    first = min(fresh)
+                if fresh and (len(fresh) == len(self.specs) or now >= first + window):
                     return dict(self.newest)
                 if cancelled():
                     raise CanceledError()
-                end = min(fresh) + window if fresh else since + timeout
+                end = first + window if fresh else since + timeout
                 if not fresh and now >= end:
                     return None
                 self.cond.wait(max(0.0, min(end - now, poll_s)))
