@@ -9,12 +9,12 @@ import sys
 
 import numpy as np
 import rclpy
-from rclpy.executors import ExternalShutdownException
 from sensor_msgs.msg import LaserScan
 
 from global_loc.core.map_io import load_map_yaml
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import scan_to_msg
+from global_loc.ros.node_main import run_node
 from global_loc.sim.raycast import simulate_scan
 
 
@@ -24,28 +24,25 @@ def main():
     mode = sys.argv[6] if len(sys.argv) > 6 else 'upright'
     occupancy_map = load_map_yaml(map_yaml)
     rng = np.random.default_rng(0)
-    rclpy.init()
-    node = rclpy.create_node('test_scan_publisher')
-    pub = node.create_publisher(LaserScan, '/scan', 5)
 
-    def tick():
-        scan = simulate_scan(occupancy_map, Rigid2D(x, y, yaw), 270.0, 541, 20.0, noise_std=0.01, dropout=0.02, rng=rng)
-        if mode == 'upside_down':
-            scan.ranges = scan.ranges[::-1]
-        msg = scan_to_msg(scan, 'laser', node.get_clock().now().to_msg())
-        if mode == 'mirrored':
-            msg.angle_increment = -msg.angle_increment
-        pub.publish(msg)
+    def make_node():      # run_node (the package's one way a node runs) inits, spins and stops
+        node = rclpy.create_node('test_scan_publisher')
+        pub = node.create_publisher(LaserScan, '/scan', 5)
 
-    node.create_timer(1.0 / rate, tick)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+        def tick():
+            scan = simulate_scan(occupancy_map, Rigid2D(x, y, yaw), 270.0, 541, 20.0, noise_std=0.01, dropout=0.02,
+                                 rng=rng)
+            if mode == 'upside_down':
+                scan.ranges = scan.ranges[::-1]
+            msg = scan_to_msg(scan, 'laser', node.get_clock().now().to_msg())
+            if mode == 'mirrored':
+                msg.angle_increment = -msg.angle_increment
+            pub.publish(msg)
+
+        node.create_timer(1.0 / rate, tick)
+        return node
+
+    sys.exit(run_node(make_node))
 
 
 if __name__ == '__main__':

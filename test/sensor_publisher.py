@@ -17,7 +17,6 @@ import sys
 import numpy as np
 import rclpy
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
 from rclpy.time import Time
 from sensor_msgs.msg import LaserScan, PointCloud2, PointField
 
@@ -26,6 +25,7 @@ from global_loc.core.mount3d import Mount3D
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.cloud import cloud_to_msg
 from global_loc.ros.convert import scan_to_msg
+from global_loc.ros.node_main import run_node
 from global_loc.sim.raycast import simulate_scan
 
 
@@ -45,37 +45,33 @@ def main():
     map_yaml, x, y, yaw = sys.argv[1], *map(float, sys.argv[2:5])
     sensors = json.loads(sys.argv[5])
     occupancy_map, truth = load_map_yaml(map_yaml), Rigid2D(x, y, yaw)
-    rclpy.init()
-    node = rclpy.create_node('test_sensor_publisher')
-    rng = np.random.default_rng(0)
-    pubs = {s['topic']: node.create_publisher(LaserScan if s['kind'] == 'scan' else PointCloud2, s['topic'], 5)
-            for s in sensors}
 
-    def tick():
-        now = node.get_clock().now()
-        for s in sensors:
-            if 'silent_if' in s and os.path.exists(s['silent_if']):
-                continue
-            if s['kind'] != 'scan':
-                pubs[s['topic']].publish(broken_cloud(s['kind'], now.to_msg()))
-                continue
-            mount = Mount3D.from_values(s.get('mount', [0.0] * 6))
-            scan = simulate_scan(occupancy_map, truth * mount.upright(), s.get('fov', 270.0), s.get('beams', 541),
-                                 s.get('range_max', 20.0), noise_std=0.01, rng=rng)
-            offset = s.get('stamp_offset_s', 0.0)
-            stamp = (now + Duration(seconds=offset) if offset >= 0 else
-                     Time(nanoseconds=now.nanoseconds - int(-offset * 1e9))).to_msg()
-            pubs[s['topic']].publish(scan_to_msg(scan, s.get('frame', 'laser'), stamp))
+    def make_node():      # run_node (the package's one way a node runs) inits, spins and stops
+        node = rclpy.create_node('test_sensor_publisher')
+        rng = np.random.default_rng(0)
+        pubs = {s['topic']: node.create_publisher(LaserScan if s['kind'] == 'scan' else PointCloud2, s['topic'], 5)
+                for s in sensors}
 
-    node.create_timer(0.2, tick)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+        def tick():
+            now = node.get_clock().now()
+            for s in sensors:
+                if 'silent_if' in s and os.path.exists(s['silent_if']):
+                    continue
+                if s['kind'] != 'scan':
+                    pubs[s['topic']].publish(broken_cloud(s['kind'], now.to_msg()))
+                    continue
+                mount = Mount3D.from_values(s.get('mount', [0.0] * 6))
+                scan = simulate_scan(occupancy_map, truth * mount.upright(), s.get('fov', 270.0), s.get('beams', 541),
+                                     s.get('range_max', 20.0), noise_std=0.01, rng=rng)
+                offset = s.get('stamp_offset_s', 0.0)
+                stamp = (now + Duration(seconds=offset) if offset >= 0 else
+                         Time(nanoseconds=now.nanoseconds - int(-offset * 1e9))).to_msg()
+                pubs[s['topic']].publish(scan_to_msg(scan, s.get('frame', 'laser'), stamp))
+
+        node.create_timer(0.2, tick)
+        return node
+
+    sys.exit(run_node(make_node))
 
 
 if __name__ == '__main__':

@@ -104,18 +104,14 @@ def build_trials(args, suites, maps, poses, notes) -> tuple[list, list, dict]:
     trials = []
     if 'cut' in suites:
         trials += cut_trials(maps, max(1, poses // 5) if args.poses else (3 if args.quick else 10), args.seed)
-    if 'sim' in suites:
-        print('simulating scans with pybullet ...', file=sys.stderr)
-        trials += sim_trials(maps, poses, args.seed)
-    if 'prior' in suites:
-        print('simulating scans for the search-prior suite ...', file=sys.stderr)
-        trials += prior_trials(maps, poses, args.seed)
-    if 'changed' in suites:
-        print('ray-casting scans in changed worlds ...', file=sys.stderr)
-        trials += changed_trials(maps, poses, args.seed)
-    if 'sensors' in suites:
-        print('simulating lasers and the 3D lidar for the sensors suite ...', file=sys.stderr)
-        trials += sensors_trials(maps, poses, args.seed)
+    seeded = (('sim', 'simulating scans with pybullet', sim_trials),
+              ('prior', 'simulating scans for the search-prior suite', prior_trials),
+              ('changed', 'ray-casting scans in changed worlds', changed_trials),
+              ('sensors', 'simulating lasers and the 3D lidar for the sensors suite', sensors_trials))
+    for suite, doing, make in seeded:
+        if suite in suites:
+            print(f'{doing} ...', file=sys.stderr)
+            trials += make(maps, poses, args.seed)
     carmen, carmen_maps = [], {}
     if 'carmen' in suites or 'relocalization' in suites:
         print('building held-out maps from the CARMEN logs ...', file=sys.stderr)

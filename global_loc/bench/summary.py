@@ -21,7 +21,8 @@ SUITE_TRIALS = {
 # Suites with their own figures (not one localization per trial), by the folder they are committed in.
 OTHER_REPORTS = {'relocalization': 'keeping a robot localized', 'follow': 'settling by motion on real logs',
                  'soak': 'real server processes under faults', 'one_job': 'one localization at a time, every core',
-                 'big_map': 'the 6000² tiled building'}
+                 'big_map': 'the 6000² tiled building',
+                 'faults': 'runtime changes against the real server: wrong poses published, hangs, recovery'}
 
 
 def comparable(rows: list[dict]) -> list[dict]:
