@@ -97,13 +97,6 @@ class MapSlot(Generic[L]):
                 self._cond.wait(min(poll_s, remaining))
             return self._installed
 
-    def wait_idle(self, timeout: float) -> bool:
-        """Until no map waits or builds (tests, shutdown)."""
-        with self._cond:
-            return self._cond.wait_for(lambda: self._pending is None and not self._building, timeout)
-
-    _building = False
-
     def _run(self) -> None:
         while True:
             with self._cond:
@@ -111,13 +104,7 @@ class MapSlot(Generic[L]):
                 if self._closed:
                     return
                 (generation, load), self._pending = self._pending, None
-                self._building = True
-            try:
-                self._finish(generation, load)
-            finally:
-                with self._cond:
-                    self._building = False
-                    self._cond.notify_all()
+            self._finish(generation, load)     # notifies the waiters itself
 
     def _finish(self, generation: int, load: Callable) -> Installed:
         try:
