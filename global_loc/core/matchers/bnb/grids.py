@@ -38,20 +38,16 @@ class PrecomputationGridStack:
         most = max(n for n in range(1, 9) if self.margin(n - 1) <= MARGINS[-1])
         if not 1 <= options.levels <= most:
             raise ValueError(f'bnb levels must be 1 .. {most}, got {options.levels}')
-        occupied = occupancy_map.occupied
-        self.occupied = occupied.astype(np.uint8)     # for the free-space check
-        # exp(-d^2 / 2 sigma^2) in place: a 4000^2 map's float32 temporaries are 64 MB each
-        self.field = occupancy_map.distance_to_occupied().astype(np.float32, copy=False)
-        np.square(self.field, out=self.field)
-        self.field *= np.float32(-1.0 / (2.0 * options.sigma_cells ** 2))
-        np.exp(self.field, out=self.field)
+        # Built in the order that keeps the peak low: the planes, the largest part, last, and
+        # every array written where it is kept (36 Mcells: peak 1038 -> 881 MB, see fill_planes).
+        self.field = likelihood_field(occupancy_map, options.sigma_cells)
+        self.occupied = occupancy_map.occupied.view(np.uint8)     # 0 / 1 for the free-space check, no copy
+        self.free = free_blocks(occupancy_map.free, options.levels)
         p = (2 ** top) + 2 * int(self.margin(top)) + 2
         shift = np.array([max(0, h - PLANE_SHIFT_FROM) for h in range(options.levels)], np.int64)
         unit = 2 ** int(shift.max())
         # padded so that every plane's size divides evenly
-        height, width = (-(-(n + 2 * p) // unit) * unit for n in occupied.shape)
-        base = np.zeros((height, width), np.uint8)
-        base[p:p + occupied.shape[0], p:p + occupied.shape[1]] = np.rint(self.field * 255).astype(np.uint8)
+        height, width = (-(-(n + 2 * p) // unit) * unit for n in self.field.shape)
         # Level h reads widenings from margin(h, ~0) (1 cell of rounding for h > 0) up to
         # margin(h): only those planes are kept.
         self.index: dict[tuple[int, int], int] = {}
@@ -67,18 +63,10 @@ class PrecomputationGridStack:
                             for h in range(options.levels)]
         sizes = [(height >> int(shift[h])) * (width >> int(shift[h])) for h, _ in self.index]
         self.offsets = np.cumsum([0] + sizes[:-1]).astype(np.int64)
-        flat = np.empty(sum(sizes), np.uint8)      # written plane by plane: no list to concatenate
-        plane = np.empty_like(base)
-        for (h, m), start, n in zip(self.index, self.offsets, sizes, strict=True):
-            k = 2 ** int(shift[h])
-            # dilate's window at (x, y) spans [x - anchor, x - anchor + size): the block and m
-            # around it, and the k - 1 cells after it that the stored cell (x, y) also stands for
-            size = 2 ** h + 2 * m + k - 1
-            cv2.dilate(base, np.ones((size, size), np.uint8), dst=plane, anchor=(m, m))
-            flat[start:start + n].reshape(height >> int(shift[h]), width >> int(shift[h]))[:] = plane[::k, ::k]
-        del plane, base
+        flat = np.empty(sum(sizes), np.uint8)
+        fill_planes(flat, self.field, p, (height, width),
+                    [(h, m, int(shift[h]), int(o)) for (h, m), o in zip(self.index, self.offsets, strict=True)])
         self.planes = Planes(flat, shift, np.array([width >> int(s) for s in shift], np.int64), p, width, height)
-        self.free = free_blocks(occupancy_map.free, options.levels)
         self.nbytes = self.field.nbytes + self.planes.flat.nbytes + self.free.flags.nbytes + self.occupied.nbytes
 
     def free_block(self, level: int, u, v):
@@ -106,15 +94,81 @@ class PrecomputationGridStack:
         return out
 
 
+def likelihood_field(occupancy_map: OccupancyMap, sigma_cells: float) -> np.ndarray:
+    """float32 (H, W): exp(-d^2 / 2 sigma^2) of each cell's distance d to the nearest
+    occupied cell, computed in place (no float temporaries of the map's size)."""
+    field = occupancy_map.distance_to_occupied().astype(np.float32, copy=False)
+    np.square(field, out=field)
+    field *= np.float32(-1.0 / (2.0 * sigma_cells ** 2))
+    np.exp(field, out=field)
+    return field
+
+
+ROWS_PER_PASS = 1024       # rows dilated per pass for the shifted planes (plus the window's overlap)
+
+
+def fill_planes(flat: np.ndarray, field: np.ndarray, p: int, shape: tuple[int, int], planes) -> None:
+    """Write the planes into `flat`; `planes` lists (level h, widening m, shift, offset) in
+    flat's order, the first (0, 0, 0, 0): rint(field x 255) framed by p zero cells to
+    `shape`, which the others dilate. Plane (h, m) stored at 1 / k = 1 / 2^shift
+    resolution holds at (Y, X) the maximum of the first over rows and columns [kY - m, kY
+    - m + size) x [kX - m, kX - m + size), size = 2^h + 2m + k - 1 (the block and m around
+    it, and the k - 1 cells after it that the stored cell also stands for). Every plane is
+    written in place, the shifted ones first, dilated ROWS_PER_PASS rows at a time: no
+    temporary of the map's size, and none left when the last full-size plane is written."""
+    if tuple(planes[0]) != (0, 0, 0, 0):
+        raise ValueError('the first plane must be the unwidened level 0')
+    height, width = shape
+    base = flat[:height * width].reshape(height, width)
+    base[:p] = 0
+    base[p + field.shape[0]:] = 0
+    base[:, :p] = 0
+    base[:, p + field.shape[1]:] = 0
+    scaled = np.empty((min(256, field.shape[0]), field.shape[1]), np.float32)
+    for r in range(0, field.shape[0], len(scaled)):      # np.rint(field * 255).astype(np.uint8), by rows
+        rows = field[r:r + len(scaled)]
+        np.multiply(rows, np.float32(255), out=scaled[:len(rows)])
+        np.rint(scaled[:len(rows)], out=scaled[:len(rows)])
+        base[p + r:p + r + len(rows), p:p + field.shape[1]] = scaled[:len(rows)]
+    del scaled
+    widened = [(m, 2 ** h + 2 * m + (1 << shift) - 1, shift,
+                flat[offset:offset + (height >> shift) * (width >> shift)].reshape(height >> shift, width >> shift))
+               for h, m, shift, offset in planes[1:]]
+    shifted = [w for w in widened if w[2] > 0]
+    if shifted:
+        dilated = np.empty((min(height, ROWS_PER_PASS + max(w[1] for w in shifted)), width), np.uint8)
+        for m, size, shift, out in shifted:
+            dilate_shifted(base, m, size, 1 << shift, out, dilated)
+        del dilated
+    for m, size, _, out in (w for w in widened if w[2] == 0):
+        cv2.dilate(base, np.ones((size, size), np.uint8), dst=out, anchor=(m, m))
+
+
+def dilate_shifted(base: np.ndarray, m: int, size: int, k: int, out: np.ndarray, dilated: np.ndarray) -> None:
+    """out[Y, X] = cv2.dilate(base, size x size, anchor (m, m))[kY, kX], computed
+    ROWS_PER_PASS rows of base at a time in `dilated` (at least ROWS_PER_PASS + size rows)."""
+    kernel = np.ones((size, size), np.uint8)
+    for y0 in range(0, out.shape[0], ROWS_PER_PASS // k):
+        y1 = min(out.shape[0], y0 + ROWS_PER_PASS // k)
+        # the rows of base that stored rows y0 .. y1 - 1 read; rows past its edge count as 0
+        a, b = max(0, k * y0 - m), min(base.shape[0], k * (y1 - 1) - m + size)
+        cv2.dilate(base[a:b], kernel, dst=dilated[:b - a], anchor=(m, m))
+        out[y0:y1] = dilated[k * y0 - a:k * (y1 - 1) - a + 1:k, ::k]
+
+
 def free_blocks(free: np.ndarray, levels: int) -> FreeBlocks:
-    """Per level h, whether block (u >> h, v >> h) of the map holds a free cell."""
-    offsets, widths, blocks = [], [], []
-    for h in range(levels):
-        k = 2 ** h
-        rows, cols = -(-free.shape[0] // k), -(-free.shape[1] // k)
-        padded = np.zeros((rows * k, cols * k), bool)
-        padded[:free.shape[0], :free.shape[1]] = free
-        offsets.append(sum(len(b) for b in blocks))
-        widths.append(cols)
-        blocks.append(padded.reshape(rows, k, cols, k).any(axis=(1, 3)).astype(np.uint8).ravel())
-    return FreeBlocks(np.concatenate(blocks), np.array(offsets, np.int64), np.array(widths, np.int64))
+    """Per level h, whether block (u >> h, v >> h) of the map holds a free cell: level 0 is
+    `free`, level h the 2 x 2 blocks of level h - 1 (blocks past the map's edge hold none)."""
+    shapes = [(-(-free.shape[0] // 2 ** h), -(-free.shape[1] // 2 ** h)) for h in range(levels)]
+    offsets = np.cumsum([0] + [r * c for r, c in shapes[:-1]]).astype(np.int64)
+    flags = np.empty(sum(r * c for r, c in shapes), np.uint8)
+    level = flags[:free.size].reshape(free.shape)
+    level[:] = free
+    for (rows, cols), offset in zip(shapes[1:], offsets[1:], strict=True):
+        below, level = level, flags[offset:offset + rows * cols].reshape(rows, cols)
+        r, c = below.shape[0] // 2, below.shape[1] // 2       # the blocks with a second row, column below
+        level[:] = below[0::2, 0::2]
+        np.maximum(level[:r], below[1::2, 0::2], out=level[:r])
+        np.maximum(level[:, :c], below[0::2, 1::2], out=level[:, :c])
+        np.maximum(level[:r, :c], below[1::2, 1::2], out=level[:r, :c])
+    return FreeBlocks(flags, offsets, np.array([c for _, c in shapes], np.int64))
