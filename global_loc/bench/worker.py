@@ -39,7 +39,8 @@ def run_job(job):
                outcome=res.outcome.label)
     search_s = getattr(res.search_stats, 'search_s', None)
     if search_s is not None:      # bnb: the search proper, apart from the fixed work around it
-        row.update(search_s=search_s, expansions=res.search_stats.expansions)
+        row.update(search_s=search_s, expansions=res.search_stats.expansions, settled=res.search_stats.settled,
+                   hypotheses=len(res.hypotheses))
     if res.pose is None:
         row.update(ok=False, ok_loose=False)
     else:

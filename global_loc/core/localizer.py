@@ -128,7 +128,7 @@ class Localizer:
         if bounded:
             candidates = [c for c in candidates if region.contains(c.laser_pose * laser_T_base)]
         # the matcher decided which hypotheses are distinct; the verdict judges them as they are
-        verdict = matcher.judge(candidates, found.stopped)
+        verdict = matcher.judge(candidates, found.stopped, found.settled)
         hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in candidates]
         message = f'{verdict.message}; {widened}' if widened else verdict.message
         result = LocalizationResult(verdict.outcome, message, matcher.name, confidence=verdict.confidence,

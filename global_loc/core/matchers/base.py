@@ -71,6 +71,7 @@ class Match:
     candidates: list[Candidate]   # the distinct hypotheses, best first: what the verdict judges
     stats: Any = None        # the matcher's search statistics (bnb: SearchStats), for diagnostics
     stopped: str = ''        # why the search stopped before it was exhaustive ('' when it was)
+    settled: str = ''        # why it ended before searching all it would, its answer settled ('' when it did not)
 
 
 @dataclass
@@ -135,14 +136,19 @@ class Matcher(ABC):
         """This matcher's distinct hypotheses among its candidates, best first."""
         return distinct(candidates, self.hypotheses, self.distinct_m, self.distinct_angle)
 
-    def judge(self, candidates: list[Candidate], stopped: str = '') -> Verdict:
+    def judge(self, candidates: list[Candidate], stopped: str = '', settled: str = '') -> Verdict:
         """The verdict on the distinct hypotheses (best first) of a search that stopped
-        for `stopped` ('' when it was exhaustive): the one place a search stopped short
-        is judged - never a success, a better place may lie in what it did not explore."""
+        for `stopped` ('' when it was exhaustive), or ended early because its answer was
+        settled (`settled`, Match.settled): the one place a search stopped short is judged
+        - never a success, a better place may lie in what it did not explore."""
         if stopped:
             seen = 'best of what was explored, see the hypotheses' if candidates else 'nothing found before it stopped'
             return Verdict(Outcome.SEARCH_INCOMPLETE, 0.0, f'search incomplete: {stopped}; {seen}')
-        return self.judge_exhaustive(candidates)
+        verdict = self.judge_exhaustive(candidates)
+        if settled and verdict.success:    # the matcher ends early only on an answer that is not (a guard)
+            return Verdict(Outcome.SEARCH_INCOMPLETE, 0.0, f'search incomplete: {settled}, yet the hypotheses are '
+                                                            f'judged confident')
+        return Verdict(verdict.outcome, verdict.confidence, f'{verdict.message} ({settled})') if settled else verdict
 
     def judge_exhaustive(self, candidates: list[Candidate]) -> Verdict:
         """The verdict on an exhaustive search's distinct hypotheses. The thesis matchers:

@@ -26,6 +26,7 @@ from typing import Optional
 import numpy as np
 
 from ...map_io import OccupancyMap
+from ...outcome import Outcome
 from ...pixel_kernels import warm_up as warm_up_pixel_kernels
 from ...scan import ScanPoints
 from ...search_region import SearchRegion
@@ -38,8 +39,11 @@ from .kernels import warm_up as warm_up_search
 from .options import BranchAndBoundOptions
 from .refine import bin_maxima, landscape_covariance, refine
 from .refine import warm_up as warm_up_refine
-from .search import SearchStats, ThreadedSearch, search_threads
-from .verdict import judge
+from .search import SearchStats, SettledFn, ThreadedSearch, search_threads
+from .verdict import judge, unscored_could_be_confident
+
+SETTLED = ('the search ended once no place it had not scored could make the answer confident: the hypotheses are '
+           'those found by then')
 
 
 def warm_up() -> None:
@@ -124,23 +128,57 @@ class BranchAndBoundMatcher(Matcher):
         tables = self.tables(pts, d0, n_angles)
         search_start = time.perf_counter()
         bounds = node_bounds(self.stack.planes, tables, tu, tv, ta, top)
-        leaves, per_level, exact = self.searcher.run(
-            self.stack.planes, tables, self.stack.free, space,
-            np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, opt.max_nodes, progress, deadline)
+        run = self.searcher.run(self.stack.planes, tables, self.stack.free, space,
+                                np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, opt.max_nodes, progress,
+                                deadline, self.settled_check(pts, d0, points))
         search_s = time.perf_counter() - search_start
+        leaves, expansions = run.leaves, int(run.per_level.sum())
         scores = leaves[:, 3] / (255.0 * len(pts))
-        expansions = int(per_level.sum())
-        stopped = '' if exact else (f'stopped after {expansions} node expansions' if expansions >= opt.max_nodes
-                                    else f'stopped at the {options.max_search_s:g} s search limit')
-        stats = SearchStats(exact=exact, angles=n_angles, points=len(pts), leaves=len(scores),
-                            expansions=expansions, per_level=tuple(per_level.tolist()), top_nodes=len(tu),
+        stopped = '' if run.exact or run.settled else (
+            f'stopped after {expansions} node expansions' if expansions >= opt.max_nodes
+            else f'stopped at the {options.max_search_s:g} s search limit')
+        stats = SearchStats(exact=run.exact, angles=n_angles, points=len(pts), leaves=len(scores),
+                            expansions=expansions, per_level=tuple(run.per_level.tolist()), top_nodes=len(tu),
                             threads=search_threads(), best_leaf=float(scores.max()) if len(scores) else 0.0,
-                            search_s=search_s)
+                            search_s=search_s, settled=run.settled)
         # 3. Peaks, refined, checked for free space, ranked.
         candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], scores, pts, d0, points)
         if progress:
             progress(1.0, candidates[0].score if candidates else 0.0)
-        return Match(candidates, stats, stopped)
+        settled = SETTLED if run.settled else ''
+        return Match(candidates, stats, stopped, settled)
+
+    def settled_check(self, pts, d0, points: ScanPoints) -> Optional[SettledFn]:
+        """The search's early end (search.ThreadedSearch.run's `settled`): True once no
+        place it has not scored can make the answer confident - every such place's leaf
+        scores at most the highest pending bound, its refined score at most that plus
+        settle_slack (verdict.unscored_could_be_confident) - and the hypotheses found so far
+        are judged `poor match`, or `ambiguous` with a full list of hypotheses (resolving by
+        motion follows an ambiguous answer's list: a shorter one could miss the true place).
+        The rest of the band could then change the hypotheses and the confidence number,
+        never make the answer a success. Refining and judging the leaves costs up to ~20
+        ms, a slice's work: done only when the best leaf, refined at most settle_slack
+        higher, could end the search, and again only once the leaves grew by a fifth."""
+        opt = self.options
+        if opt.settle_slack >= 1.0:
+            return None
+        norm = 255.0 * len(pts)
+        judged = {'leaves': 0, 'settled': False, 'fit': 1.0}
+
+        def settled(leaves: np.ndarray, top: int) -> bool:
+            bound = top / norm + opt.settle_slack
+            if len(leaves) == 0 or unscored_could_be_confident(bound, leaves[:, 3].max() / norm + opt.settle_slack,
+                                                                opt):
+                return False
+            if len(leaves) > 1.2 * judged['leaves']:
+                candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, 3] / norm, pts,
+                                               d0, points)
+                outcome = judge(candidates, opt).outcome if candidates else Outcome.NO_MATCH
+                judged.update(leaves=len(leaves), fit=max((c.explained for c in candidates), default=1.0),
+                              settled=outcome == Outcome.POOR_MATCH or (outcome == Outcome.AMBIGUOUS
+                                                                        and len(candidates) >= opt.hypotheses))
+            return judged['settled'] and not unscored_could_be_confident(bound, judged['fit'], opt)
+        return settled
 
     def fit_at(self, points: ScanPoints, laser_pose: Rigid2D) -> tuple[float, float, Rigid2D]:
         """How well the map explains the scan at a laser pose, refined within about a cell

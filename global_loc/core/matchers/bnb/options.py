@@ -27,6 +27,10 @@ class BranchAndBoundOptions:
                                           '1 (the default) is always the whole keep_ratio band; at the other '
                                           'defaults 0.03 is 13-20% faster but can change answers - one confident '
                                           'wrong answer more on 150 real scans (benchmarks/READING.md)')
+    settle_slack: float = _option(0.05, "how far a pose's refined score may lie above its search score when the "
+                                        'search decides that no place it has not scored can make the answer confident '
+                                        '(it then ends early, never with a success: README, Confidence); measured, '
+                                        'not bounded: +0.045 the most seen (benchmarks/READING.md). 1: never end early')
     max_nodes: int = _option(400000, 'node expansions after which the search stops and says it was not exhaustive')
     hypotheses: int = _option(HYPOTHESES, 'distinct poses refined, judged and returned')
     distinct_m: float = _option(DISTINCT_M, 'm; poses closer than this (and distinct_angle) are one hypothesis: '
@@ -45,6 +49,8 @@ class BranchAndBoundOptions:
             raise ValueError(f'bnb keep_ratio must be in (0, 1), got {self.keep_ratio}')
         if not 0 <= self.band_allowance <= 1:
             raise ValueError(f'bnb band_allowance must be in [0, 1], got {self.band_allowance}')
+        if not 0 <= self.settle_slack <= 1:
+            raise ValueError(f'bnb settle_slack must be in [0, 1], got {self.settle_slack}')
         if not (self.hypotheses >= 1 and self.distinct_m > 0 and self.distinct_angle > 0):
             raise ValueError(f'bnb hypotheses must be >= 1 and distinct_m, distinct_angle > 0, got '
                              f'{self.hypotheses}, {self.distinct_m}, {self.distinct_angle}')

@@ -15,7 +15,7 @@ import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Optional
+from typing import Callable, NamedTuple, Optional
 
 import cv2
 import numpy as np
@@ -39,6 +39,19 @@ class SearchStats:
     best_leaf: float       # the best leaf's score, in [0, 1]
     search_s: float = 0.0  # seconds in the search proper (the tree), not in preparing the scan's
                            # tables or refining, checking and ranking the peaks
+    settled: bool = False  # it ended early: its answer could not become confident (matcher.settled_check)
+
+
+# settled(leaves kept so far, highest pending bound (raw)) -> whether the search may end there
+SettledFn = Callable[[np.ndarray, int], bool]
+
+
+class SearchRun(NamedTuple):
+    """What ThreadedSearch.run returns."""
+    leaves: np.ndarray       # rows u, v, angle index, raw score: the leaves in the best's band, in pose order
+    per_level: np.ndarray    # expansions per level
+    exact: bool              # the whole band was searched
+    settled: bool            # `settled` ended the search: the band was not all searched, the answer could not change
 
 
 def search_threads() -> int:
@@ -67,13 +80,18 @@ class ThreadedSearch:
 
     def run(self, planes: Planes, tables: ScanTables, free: FreeBlocks, space: SearchSpace, top_nodes: np.ndarray,
             top_level: int, max_nodes: int, progress: Optional[ProgressFn],
-            deadline: float = math.inf) -> tuple[np.ndarray, np.ndarray, bool]:
+            deadline: float = math.inf, settled: Optional[SettledFn] = None) -> SearchRun:
         """Expand every node whose bound reaches the best leaf's band (keep_floor), from the top
         nodes (rows u, v, a, bound). Returns the leaves scoring that high (rows u, v,
-        angle index, raw score) in pose order, the expansions per level, and whether the
+        angle index, raw score) in pose order, the expansions per level, whether the
         search was exhaustive (False when max_nodes or the deadline (time.monotonic())
-        stopped it). It holds a leaf from the start (a greedy dive from each thread's best
-        top node), so a search stopped at once still returns its best leaf found."""
+        stopped it) and whether `settled` ended it. It holds a leaf from the start (a
+        greedy dive from each thread's best top node), so a search stopped at once still
+        returns its best leaf found.
+
+        settled(leaves, top): called between slices with the leaves kept so far and the
+        highest bound still pending (raw; every leaf not scored yet scores at most that);
+        True ends the search there - for an answer the rest cannot change."""
         threads = search_threads()
         order = np.argsort(-top_nodes[:, 3], kind='stable')     # deal the best nodes evenly
         heaps = [make_heap(top_nodes[order[k::threads]], top_level) for k in range(threads)]
@@ -100,6 +118,11 @@ class ThreadedSearch:
             found.extend(leaves for _, leaves in results)
             if all(done) or expanded >= max_nodes:     # (the deadline: the loop's condition)
                 break
+            if settled is not None:
+                top = max((int(h[0][0]) >> 3 for h in heaps if h[2][0] > 0), default=-1)   # (heap_key)
+                if settled(kept_leaves(found, space, shared_best[0], tables.du.shape[1]), top):
+                    return SearchRun(kept_leaves(found, space, shared_best[0], tables.du.shape[1]),
+                                     np.sum(per_level, axis=0)[:top_level + 1], False, True)
             for k in range(threads):      # an idle thread takes half of the fullest heap
                 if done[k]:
                     j = max(range(threads), key=lambda i: heaps[i][2][0])
@@ -108,11 +131,17 @@ class ThreadedSearch:
                         done[k] = done[j] = False
             if progress:   # the server's progress callback raises CanceledError on a cancel request
                 progress(min(0.95, expanded / max_nodes), shared_best[0] / (255.0 * tables.du.shape[1]))
-        leaves = np.concatenate(found) if found else np.empty((0, 4), np.int64)
-        leaves = leaves[leaves[:, 3] >= keep_floor(space, shared_best[0], tables.du.shape[1])]
-        # in pose order, not the order the threads found them: equal scores then pick the
-        # same peaks whatever the threads; once each (the search may find a dive's leaf again)
-        _, first = np.unique((leaves[:, 0] * space.map_h + leaves[:, 1]) * space.n_angles + leaves[:, 2],
-                             return_index=True)
-        leaves = leaves[first]
-        return leaves, np.sum(per_level, axis=0)[:top_level + 1], all(done)
+        return SearchRun(kept_leaves(found, space, shared_best[0], tables.du.shape[1]),
+                         np.sum(per_level, axis=0)[:top_level + 1], all(done), False)
+
+
+def kept_leaves(found: list[np.ndarray], space: SearchSpace, best: int, n_points: int) -> np.ndarray:
+    """The leaves found (lists of rows u, v, a, raw score) that reach the band of the best
+    (keep_floor), once each, in pose order - not the order the threads found them: equal
+    scores then pick the same peaks whatever the threads (the search may find a dive's
+    leaf again)."""
+    leaves = np.concatenate(found) if found else np.empty((0, 4), np.int64)
+    leaves = leaves[leaves[:, 3] >= keep_floor(space, best, n_points)]
+    _, first = np.unique((leaves[:, 0] * space.map_h + leaves[:, 1]) * space.n_angles + leaves[:, 2],
+                         return_index=True)
+    return leaves[first]

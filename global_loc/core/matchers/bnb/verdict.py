@@ -40,6 +40,20 @@ def keep_floor(space, best, n_points):
     return np.int64(math.ceil(searched_keep(fit, space.keep_ratio, space.min_confidence, space.band_allowance) * best))
 
 
+def unscored_could_be_confident(fit_bound: float, best_fit: float, options: BranchAndBoundOptions) -> bool:
+    """Whether a place the search has not scored yet, whose field score (refined) is at
+    most fit_bound, could be judged localized against hypotheses whose best field score
+    is best_fit: it would need to explain the scan (explained >= min_confidence) and to
+    lead best_fit by the lead a confident answer needs at its fit. Both only grow with
+    the place's fit, so checking fit_bound itself settles every place below it."""
+    opt = options
+    explained = min(max((fit_bound - 0.3) / 0.3, 0.0), 1.0)
+    if explained < opt.min_confidence or explained <= 0.0:
+        return False
+    need = opt.min_confidence * (1.0 - opt.keep_ratio) / explained
+    return fit_bound * (1.0 - need) >= best_fit
+
+
 def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdict:
     """The candidates are the distinct hypotheses, best first by ranking score (field
     score x (1 - see-through share)), each with its field score (`explained`).

@@ -1,0 +1,89 @@
+"""Issue 27: the settled end of the search, A/B in one process on the same trials.
+
+For each trial, bnb runs twice on one matcher (one precomputation), interleaved:
+A = the search before it (settle_slack 1: never ends early), B = the default
+(settle_slack 0.05: ends once no place it has not scored can make the answer confident).
+Rows (bench.worker.run_job's fields plus the arm) go to rows.jsonl; summarize.py reads them.
+
+    python benchmarks/results/settle/settle_ab.py --suites changed --changed-poses 4 --out <dir>
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from dataclasses import replace
+
+import cv2
+
+from global_loc.bench import worker
+from global_loc.bench.changed import changed_trials
+from global_loc.bench.suites import carmen_trials, cut_trials, load_maps, prior_trials, sim_trials
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+
+
+def build(args):
+    trials, maps = [], {}
+    if {'sim', 'cut', 'prior'} & set(args.suites):
+        quick_maps = load_maps(args.shared, quick=True)
+        maps.update(quick_maps)
+        if 'cut' in args.suites:
+            trials += cut_trials(quick_maps, 3, args.seed)
+        if 'sim' in args.suites:
+            trials += sim_trials(quick_maps, args.poses, args.seed)
+        if 'prior' in args.suites:
+            trials += prior_trials(quick_maps, args.poses, args.seed)
+    if 'changed' in args.suites:
+        full = load_maps(args.shared, quick=False)
+        maps.update(full)
+        trials += changed_trials(full, args.changed_poses, args.seed)
+    if 'carmen' in args.suites:
+        carmen, carmen_maps, _ = carmen_trials(args.shared, args.scans_per_log, args.seed)
+        maps.update(carmen_maps)
+        trials += carmen
+    return trials, maps
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser()
+    p.add_argument('--suites', default='changed')
+    p.add_argument('--poses', type=int, default=6)
+    p.add_argument('--changed-poses', type=int, default=4)
+    p.add_argument('--scans-per-log', type=int, default=12)
+    p.add_argument('--seed', type=int, default=2015)
+    p.add_argument('--threads', type=int, default=2, help='search threads (cv2.setNumThreads)')
+    p.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'))
+    p.add_argument('--out', required=True)
+    args = p.parse_args(argv)
+    args.suites = args.suites.split(',')
+    os.makedirs(args.out, exist_ok=True)
+    trials, maps = build(args)
+    print(f'{len(trials)} trials', file=sys.stderr)
+    worker.worker_init(maps, args.threads)
+    cv2.setNumThreads(args.threads)
+    t0 = time.time()
+    with open(os.path.join(args.out, 'rows.jsonl'), 'w') as out:
+        for i, trial in enumerate(trials):
+            loc = worker._LOCALIZERS.get(trial.map_name)
+            if loc is None:
+                worker.run_job((i, trial, 'bnb'))      # builds the Localizer and its matcher (first time: numba)
+                loc = worker._LOCALIZERS[trial.map_name]
+            m = loc.matcher('bnb')
+            default = m.options
+            for arm, opts in (('A', replace(default, settle_slack=1.0)), ('B', default)):
+                m.options = opts
+                row = worker.run_job((i, trial, 'bnb'))
+                row.update(arm=arm, settle_slack=opts.settle_slack)
+                out.write(json.dumps(row) + '\n')
+                out.flush()
+            m.options = default
+            if i % 20 == 0:
+                print(f'{i}/{len(trials)} {time.time() - t0:.0f} s', file=sys.stderr, flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
