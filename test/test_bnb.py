@@ -66,11 +66,12 @@ def test_branch_and_bound_finds_the_brute_force_maximum_and_every_pose_near_it(s
     assert whole.stats.leaves == np.count_nonzero(raw >= math.ceil(opt.keep_ratio * raw.max()))
 
 
-def test_bounds_are_never_below_the_leaves_under_them():
+@pytest.mark.parametrize('plane_memory_mb', [320.0, 1e-3])     # the default; planes coarser from level 1 on
+def test_bounds_are_never_below_the_leaves_under_them(plane_memory_mb):
     m = small_room()
     rng = np.random.default_rng(5)
     scan = simulate_scan(m, Rigid2D(1.0, 2.0, 0.3), 360.0, 360, 4.0, rng=rng)
-    matcher = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=5))
+    matcher = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=5, plane_memory_mb=plane_memory_mb))
     pts = matcher.prepare(scan_to_points(scan).points)
     n = 512     # a point at the scan's largest range moves just under a cell per angle step
     d0 = 2 * math.pi / n
@@ -83,6 +84,28 @@ def test_bounds_are_never_below_the_leaves_under_them():
             du, dv, da = np.meshgrid(np.arange(size), np.arange(size), np.arange(size), indexing='ij')
             leaves = matcher.bounds(0, tu[i] + du.ravel(), tv[i] + dv.ravel(), ta[i] + da.ravel(), pts, d0)
             assert leaves.max() <= bound[i] + 1e-12
+
+
+def test_planes_over_their_memory_budget_are_stored_coarser_and_the_search_finds_the_same():
+    """A map whose planes would exceed bnb.plane_memory_mb stores its coarse levels at
+    lower resolution, from lower levels on, until they fit (not below level 1: the
+    leaves read the map's own resolution): looser bounds, so more nodes, but the same
+    leaves, hypotheses and scores."""
+    m = small_room()
+    rng = np.random.default_rng(7)
+    scan = simulate_scan(m, sample_free_poses(m, 1, rng, clearance=0.3)[0], 270.0, 271, 4.0, noise_std=0.01, rng=rng)
+    default = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=5))
+    budget = default.stack.planes.flat.nbytes / 1e6
+    results = {}
+    for mb, shift_from in ((budget, 3), (budget * 0.9, 2), (1e-3, 1)):
+        matcher = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=5, plane_memory_mb=mb))
+        assert matcher.stack.shift_from == shift_from
+        assert matcher.stack.planes.flat.nbytes <= mb * 1e6 or shift_from == 1    # 1: as coarse as it gets
+        found = matcher.match(scan_to_points(scan), MatchOptions())
+        results[shift_from] = ([(c.laser_pose.as_tuple(), c.score) for c in found.candidates], found.stats.leaves,
+                               found.stats.expansions)
+    assert results[1][:2] == results[2][:2] == results[3][:2] and results[3][0]
+    assert results[1][2] >= results[3][2]      # looser bounds: at least as many nodes
 
 
 @pytest.mark.parametrize('levels', [0, 8])

@@ -45,7 +45,8 @@ BNB_RANGES = {'sigma_cells': (0.1, 20.0), 'levels': (1, 7), 'max_points': (3, 10
               'keep_ratio': (0.01, 0.999), 'max_nodes': (1, 10 ** 9), 'hypotheses': (1, 100),
               'distinct_cells': (0.0, 1e4), 'distinct_m': (0.0, 1e3), 'distinct_angle': (0.0, math.pi),
               'see_through_tolerance_cells': (0.0, 100.0), 'min_confidence': (0.001, 1.0),
-              'band_allowance': (0.0, 1.0), 'settle_slack': (0.0, 1.0)}
+              'band_allowance': (0.0, 1.0), 'settle_slack': (0.0, 1.0),
+              'plane_memory_mb': (1.0, 1e6)}
 
 SPECS = [
     Spec('autostart', True, 'configure and activate on start (false: a lifecycle manager does)'),

@@ -12,7 +12,8 @@ from .options import BranchAndBoundOptions
 
 MARGINS = (0, 1, 2, 3, 4, 6, 8, 12, 16, 24, 32)   # widenings (cells) for which grids are kept
 PLANE_SHIFT_FROM = 3                   # planes of level h > this are stored at 1 / 2^(h - this)
-                                       # resolution (see PrecomputationGridStack)
+                                       # resolution (see PrecomputationGridStack), unless they
+                                       # would exceed options.plane_memory_mb: then from a lower level
 
 
 class PrecomputationGridStack:
@@ -44,10 +45,6 @@ class PrecomputationGridStack:
         self.occupied = occupancy_map.occupied.view(np.uint8)     # 0 / 1 for the free-space check, no copy
         self.free = free_blocks(occupancy_map.free, options.levels)
         p = (2 ** top) + 2 * int(self.margin(top)) + 2
-        shift = np.array([max(0, h - PLANE_SHIFT_FROM) for h in range(options.levels)], np.int64)
-        unit = 2 ** int(shift.max())
-        # padded so that every plane's size divides evenly
-        height, width = (-(-(n + 2 * p) // unit) * unit for n in self.field.shape)
         # Level h reads widenings from margin(h, ~0) (1 cell of rounding for h > 0) up to
         # margin(h): only those planes are kept.
         self.index: dict[tuple[int, int], int] = {}
@@ -61,13 +58,27 @@ class PrecomputationGridStack:
         self.level_margins = [np.array([m for (k, m) in self.index if k == h], np.int64) for h in range(options.levels)]
         self.level_grids = [np.array([i for (k, _), i in self.index.items() if k == h], np.int64)
                             for h in range(options.levels)]
-        sizes = [(height >> int(shift[h])) * (width >> int(shift[h])) for h, _ in self.index]
+        # The finest storage whose planes fit options.plane_memory_mb (coarser from a lower
+        # level: looser bounds, more nodes; the leaves' level 0 is always whole).
+        for self.shift_from in range(PLANE_SHIFT_FROM, 0, -1):
+            shift, height, width, sizes = self.plane_layout(self.field.shape, p, self.shift_from)
+            if sum(sizes) <= options.plane_memory_mb * 1e6:
+                break
         self.offsets = np.cumsum([0] + sizes[:-1]).astype(np.int64)
         flat = np.empty(sum(sizes), np.uint8)
         fill_planes(flat, self.field, p, (height, width),
                     [(h, m, int(shift[h]), int(o)) for (h, m), o in zip(self.index, self.offsets, strict=True)])
         self.planes = Planes(flat, shift, np.array([width >> int(s) for s in shift], np.int64), p, width, height)
         self.nbytes = self.field.nbytes + self.planes.flat.nbytes + self.free.flags.nbytes + self.occupied.nbytes
+
+    def plane_layout(self, shape: tuple[int, int], p: int, shift_from: int):
+        """Planes of levels above shift_from stored at 1 / 2^(h - shift_from) resolution:
+        (each level's shift, the padded map's height and width - padded so that every
+        plane's size divides evenly - and each plane's cells, in index order)."""
+        shift = np.array([max(0, h - shift_from) for h in range(self.options.levels)], np.int64)
+        unit = 2 ** int(shift.max())
+        height, width = (-(-(n + 2 * p) // unit) * unit for n in shape)
+        return shift, height, width, [(height >> int(shift[h])) * (width >> int(shift[h])) for h, _ in self.index]
 
     def free_block(self, level: int, u, v):
         """Whether the level's blocks starting at map cells (u, v) hold a free cell."""

@@ -163,7 +163,7 @@ class BranchAndBoundMatcher(Matcher):
         if opt.settle_slack >= 1.0:
             return None
         norm = 255.0 * len(pts)
-        judged = {'leaves': 0, 'settled': False, 'fit': 1.0}
+        judged = {'leaves': 0, 'settled': False, 'fit': 1.0, 'poor': False}
 
         def settled(leaves: np.ndarray, top: int) -> bool:
             bound = top / norm + opt.settle_slack
@@ -175,8 +175,11 @@ class BranchAndBoundMatcher(Matcher):
                                                d0, points)
                 outcome = judge(candidates, opt).outcome if candidates else Outcome.NO_MATCH
                 judged.update(leaves=len(leaves), fit=max((c.explained for c in candidates), default=1.0),
+                              poor=outcome == Outcome.POOR_MATCH,
                               settled=outcome == Outcome.POOR_MATCH or (outcome == Outcome.AMBIGUOUS
                                                                         and len(candidates) >= opt.hypotheses))
+            if judged['poor'] and top > leaves[:, 3].max():
+                return False       # a poor match's best pose is still shown: only once no leaf can beat it
             return judged['settled'] and not unscored_could_be_confident(bound, judged['fit'], opt)
         return settled
 

@@ -17,6 +17,9 @@ class BranchAndBoundOptions:
     sigma_cells: float = _option(1.5, 'width of the likelihood field around occupied cells, cells')
     levels: int = _option(7, 'levels of the search tree: blocks of 1 .. 2^(levels-1) cells (1 .. 7)')
     max_points: int = _option(240, 'scan points kept after the one-cell voxel filter')
+    plane_memory_mb: float = _option(320.0, 'MB the search\'s max-pooled planes may take: on a map where they would '
+                                            'take more (above ~29 Mcells) the planes of blocks of 8 cells and more '
+                                            'are stored at lower resolution - looser bounds, the same answers')
     max_range: float = _option(30.0, 'm; farther returns are left out (the angle step shrinks with the '
                                      'largest range, and far returns are the least sure)')
     keep_ratio: float = _option(0.9, 'nodes bounded above keep_ratio x the best score are explored: every '
@@ -49,6 +52,8 @@ class BranchAndBoundOptions:
             raise ValueError(f'bnb keep_ratio must be in (0, 1), got {self.keep_ratio}')
         if not 0 <= self.band_allowance <= 1:
             raise ValueError(f'bnb band_allowance must be in [0, 1], got {self.band_allowance}')
+        if not self.plane_memory_mb > 0:
+            raise ValueError(f'bnb plane_memory_mb must be > 0, got {self.plane_memory_mb}')
         if not 0 <= self.settle_slack <= 1:
             raise ValueError(f'bnb settle_slack must be in [0, 1], got {self.settle_slack}')
         if not (self.hypotheses >= 1 and self.distinct_m > 0 and self.distinct_angle > 0):
