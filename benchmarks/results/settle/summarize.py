@@ -21,7 +21,7 @@ def key(r):
 
 
 def fig(rows):
-    t = np.array([r['time_s'] for r in rows])
+    t = np.array([r['time_s'] for r in rows if r['time_s'] == r['time_s']])     # (NaN: the scan was refused)
     return (f"{sum(r['ok'] for r in rows)} / {sum(r['success'] for r in rows)} / "
             f"{sum(r['success'] and not r['ok'] for r in rows)}",
             f'{np.median(t):.3f} / {np.percentile(t, 95):.2f}',
@@ -46,7 +46,7 @@ def main(path):
         ps = groups[name]
         a, b = [p['A'] for p in ps], [p['B'] for p in ps]
         fa, fb = fig(a), fig(b)
-        ta, tb = np.percentile([r['time_s'] for r in a], 95), np.percentile([r['time_s'] for r in b], 95)
+        ta, tb = (np.nanpercentile([r['time_s'] for r in arm], 95) for arm in (a, b))
         diff = [p for p in ps if (p['A']['outcome'], p['A']['ok'], p['A']['success'])
                 != (p['B']['outcome'], p['B']['ok'], p['B']['success'])]
         changed += [(name, p) for p in diff]

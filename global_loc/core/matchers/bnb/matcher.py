@@ -152,9 +152,10 @@ class BranchAndBoundMatcher(Matcher):
         """The search's early end (search.ThreadedSearch.run's `settled`): True once no
         place it has not scored can make the answer confident - every such place's leaf
         scores at most the highest pending bound, its refined score at most that plus
-        settle_slack (verdict.unscored_could_be_confident) - and the hypotheses found so far
-        are judged `poor match`, or `ambiguous` with a full list of hypotheses (resolving by
-        motion follows an ambiguous answer's list: a shorter one could miss the true place).
+        settle_slack (verdict.unscored_could_be_confident) - once the best leaf is known, and
+        the hypotheses found so far are judged `poor match`, or `ambiguous` with a full list
+        of hypotheses (resolving by motion follows an ambiguous answer's list: a shorter one
+        could miss the true place).
         The rest of the band could then change the hypotheses and the confidence number,
         never make the answer a success. Refining and judging the leaves costs up to ~20
         ms, a slice's work: done only when the best leaf, refined at most settle_slack
@@ -163,23 +164,22 @@ class BranchAndBoundMatcher(Matcher):
         if opt.settle_slack >= 1.0:
             return None
         norm = 255.0 * len(pts)
-        judged = {'leaves': 0, 'settled': False, 'fit': 1.0, 'poor': False}
+        judged = {'leaves': 0, 'settled': False, 'fit': 1.0}
 
         def settled(leaves: np.ndarray, top: int) -> bool:
             bound = top / norm + opt.settle_slack
-            if len(leaves) == 0 or unscored_could_be_confident(bound, leaves[:, 3].max() / norm + opt.settle_slack,
-                                                                opt):
+            # not before the best leaf is known (no pending node bounds above it): without it the
+            # first pose could be a worse place than the whole search's (seen on a 60 deg view)
+            if len(leaves) == 0 or top > leaves[:, 3].max() or \
+                    unscored_could_be_confident(bound, leaves[:, 3].max() / norm + opt.settle_slack, opt):
                 return False
             if len(leaves) > 1.2 * judged['leaves']:
                 candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, 3] / norm, pts,
                                                d0, points)
                 outcome = judge(candidates, opt).outcome if candidates else Outcome.NO_MATCH
                 judged.update(leaves=len(leaves), fit=max((c.explained for c in candidates), default=1.0),
-                              poor=outcome == Outcome.POOR_MATCH,
                               settled=outcome == Outcome.POOR_MATCH or (outcome == Outcome.AMBIGUOUS
                                                                         and len(candidates) >= opt.hypotheses))
-            if judged['poor'] and top > leaves[:, 3].max():
-                return False       # a poor match's best pose is still shown: only once no leaf can beat it
             return judged['settled'] and not unscored_could_be_confident(bound, judged['fit'], opt)
         return settled
 
