@@ -19,32 +19,11 @@ from dataclasses import replace
 import cv2
 
 from global_loc.bench import worker
-from global_loc.bench.changed import changed_trials
-from global_loc.bench.suites import carmen_trials, cut_trials, load_maps, prior_trials, sim_trials
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'band'))
+from band_ab import build  # noqa: E402  (the band A/B's trials: the same suites, seeds and counts)
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
-
-
-def build(args):
-    trials, maps = [], {}
-    if {'sim', 'cut', 'prior'} & set(args.suites):
-        quick_maps = load_maps(args.shared, quick=True)
-        maps.update(quick_maps)
-        if 'cut' in args.suites:
-            trials += cut_trials(quick_maps, 3, args.seed)
-        if 'sim' in args.suites:
-            trials += sim_trials(quick_maps, args.poses, args.seed)
-        if 'prior' in args.suites:
-            trials += prior_trials(quick_maps, args.poses, args.seed)
-    if 'changed' in args.suites:
-        full = load_maps(args.shared, quick=False)
-        maps.update(full)
-        trials += changed_trials(full, args.changed_poses, args.seed)
-    if 'carmen' in args.suites:
-        carmen, carmen_maps, _ = carmen_trials(args.shared, args.scans_per_log, args.seed)
-        maps.update(carmen_maps)
-        trials += carmen
-    return trials, maps
 
 
 def main(argv=None) -> int:
