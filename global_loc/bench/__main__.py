@@ -149,7 +149,8 @@ def run_other_suites(args, suites, methods, maps, poses, threads, carmen, carmen
     if 'scaling' in suites:
         print('scaling suite (tiled maps, precomputation in fresh processes) ...', file=sys.stderr)
         cv2.setNumThreads(threads)
-        building = maps.get('building_31') or maps['office']
+        # the building the suite tiles (--quick's map set has no building_31: load it, else the office)
+        building = maps.get('building_31') or load_maps(args.shared, quick=False).get('building_31') or maps['office']
         real = {n: m for n, m in maps.items() if '/' not in n or n.endswith('/fold0')}
         notes['scaling'] = scaling_rows(building, real, 3 if args.quick else max(5, poses // 4), args.seed,
                                         [m for m in methods if m in ('bnb', BASELINE)],
