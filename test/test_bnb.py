@@ -7,8 +7,10 @@ import pytest
 
 from conftest import aisles, any_pose_near, assert_pose_near, grid_map, small_room, symmetric_room, twin_rooms, walled
 from global_loc.core.localizer import Localizer, LocalizerConfig
+from global_loc.core.map_io import make_map
 from global_loc.core.matchers import MatchOptions
-from global_loc.core.matchers.bnb import BranchAndBoundMatcher, BranchAndBoundOptions
+from global_loc.core.matchers.bnb import BranchAndBoundMatcher, BranchAndBoundOptions, grids
+from global_loc.core.matchers.bnb.grids import PrecomputationGridStack
 from global_loc.core.matchers.bnb.verdict import searched_keep
 from global_loc.core.outcome import Outcome
 from global_loc.core.scan import scan_to_points
@@ -95,7 +97,7 @@ def test_planes_over_their_memory_budget_are_stored_coarser_and_the_search_finds
     rng = np.random.default_rng(7)
     scan = simulate_scan(m, sample_free_poses(m, 1, rng, clearance=0.3)[0], 270.0, 271, 4.0, noise_std=0.01, rng=rng)
     default = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=5))
-    budget = default.stack.planes.flat.nbytes / 1e6
+    budget = (default.stack.planes.flat.nbytes + 1) / 1e6      # (+1 byte: MB rounding)
     results = {}
     for mb, shift_from in ((budget, 3), (budget * 0.9, 2), (1e-3, 1)):
         matcher = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=5, plane_memory_mb=mb))
@@ -106,6 +108,22 @@ def test_planes_over_their_memory_budget_are_stored_coarser_and_the_search_finds
                                found.stats.expansions)
     assert results[1][:2] == results[2][:2] == results[3][:2] and results[3][0]
     assert results[1][2] >= results[3][2]      # looser bounds: at least as many nodes
+
+
+def test_planes_built_a_few_rows_at_a_time_are_those_built_at_once(monkeypatch):
+    """The shifted planes are dilated ROWS_PER_PASS rows at a time (a big map's memory):
+    with passes of 16 rows, on an odd-sized map taller than the 256-row conversion pass
+    and planes coarser from level 1 on (every shift), the same planes as in one pass."""
+    rng = np.random.default_rng(11)
+    occupancy = np.where(rng.random((301, 157)) < 0.03, 100, 0).astype(np.int8)
+    occupancy[rng.random(occupancy.shape) < 0.05] = -1
+    m = make_map(occupancy, 0.05, Rigid2D())
+    options = BranchAndBoundOptions(plane_memory_mb=1e-3)
+    at_once = PrecomputationGridStack(m, options)
+    monkeypatch.setattr(grids, 'ROWS_PER_PASS', 16)
+    by_rows = PrecomputationGridStack(m, options)
+    assert at_once.shift_from == 1 and np.array_equal(at_once.planes.flat, by_rows.planes.flat)
+    assert np.array_equal(at_once.field, by_rows.field) and np.array_equal(at_once.free.flags, by_rows.free.flags)
 
 
 @pytest.mark.parametrize('levels', [0, 8])

@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from ..core.map_io import load_map_yaml
 from .changed import changed_trials
 from .faults import SCENARIOS, fault_rows
 from .follow import follow_rows
@@ -37,6 +38,7 @@ from .suites import (
     cut_trials,
     load_maps,
     prior_trials,
+    shared_maps,
     sim_trials,
     symmetric_maps,
 )
@@ -150,7 +152,8 @@ def run_other_suites(args, suites, methods, maps, poses, threads, carmen, carmen
         print('scaling suite (tiled maps, precomputation in fresh processes) ...', file=sys.stderr)
         cv2.setNumThreads(threads)
         # the building the suite tiles (--quick's map set has no building_31: load it, else the office)
-        building = maps.get('building_31') or load_maps(args.shared, quick=False).get('building_31') or maps['office']
+        building_yaml = shared_maps(args.shared).get('building_31')
+        building = maps.get('building_31') or (load_map_yaml(building_yaml) if building_yaml else maps['office'])
         real = {n: m for n, m in maps.items() if '/' not in n or n.endswith('/fold0')}
         notes['scaling'] = scaling_rows(building, real, 3 if args.quick else max(5, poses // 4), args.seed,
                                         [m for m in methods if m in ('bnb', BASELINE)],

@@ -60,10 +60,12 @@ class PrecomputationGridStack:
                             for h in range(options.levels)]
         # The finest storage whose planes fit options.plane_memory_mb (coarser from a lower
         # level: looser bounds, more nodes; the leaves' level 0 is always whole).
-        for self.shift_from in range(PLANE_SHIFT_FROM, 0, -1):
-            shift, height, width, sizes = self.plane_layout(self.field.shape, p, self.shift_from)
+        # (best effort: below shift_from 1 nothing is coarser - the budget may be exceeded)
+        for shift_from in range(PLANE_SHIFT_FROM, 0, -1):
+            shift, height, width, sizes = self.plane_layout(self.field.shape, p, shift_from)
             if sum(sizes) <= options.plane_memory_mb * 1e6:
                 break
+        self.shift_from = shift_from
         self.offsets = np.cumsum([0] + sizes[:-1]).astype(np.int64)
         flat = np.empty(sum(sizes), np.uint8)
         fill_planes(flat, self.field, p, (height, width),
@@ -72,7 +74,8 @@ class PrecomputationGridStack:
         self.nbytes = self.field.nbytes + self.planes.flat.nbytes + self.free.flags.nbytes + self.occupied.nbytes
 
     def plane_layout(self, shape: tuple[int, int], p: int, shift_from: int):
-        """Planes of levels above shift_from stored at 1 / 2^(h - shift_from) resolution:
+        """Planes of levels above shift_from stored at 1 / 2^(h - shift_from) resolution, for
+        the planes of self.index and self.options.levels:
         (each level's shift, the padded map's height and width - padded so that every
         plane's size divides evenly - and each plane's cells, in index order)."""
         shift = np.array([max(0, h - shift_from) for h in range(self.options.levels)], np.int64)
@@ -159,8 +162,9 @@ def dilate_shifted(base: np.ndarray, m: int, size: int, k: int, out: np.ndarray,
     """out[Y, X] = cv2.dilate(base, size x size, anchor (m, m))[kY, kX], computed
     ROWS_PER_PASS rows of base at a time in `dilated` (at least ROWS_PER_PASS + size rows)."""
     kernel = np.ones((size, size), np.uint8)
-    for y0 in range(0, out.shape[0], ROWS_PER_PASS // k):
-        y1 = min(out.shape[0], y0 + ROWS_PER_PASS // k)
+    step = max(1, ROWS_PER_PASS // k)      # stored rows per pass (a stored row stands for k rows of base)
+    for y0 in range(0, out.shape[0], step):
+        y1 = min(out.shape[0], y0 + step)
         # the rows of base that stored rows y0 .. y1 - 1 read; rows past its edge count as 0
         a, b = max(0, k * y0 - m), min(base.shape[0], k * (y1 - 1) - m + size)
         cv2.dilate(base[a:b], kernel, dst=dilated[:b - a], anchor=(m, m))

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Optional
+from typing import NamedTuple, Optional
 
 import numpy as np
 
@@ -41,6 +41,14 @@ from .refine import bin_maxima, landscape_covariance, refine
 from .refine import warm_up as warm_up_refine
 from .search import SearchStats, SettledFn, ThreadedSearch, search_threads
 from .verdict import judge, unscored_could_be_confident
+
+
+class SettledJudgment(NamedTuple):
+    """settled_check's last judgment of the leaves kept so far."""
+    leaves: int        # how many leaves it judged
+    settled: bool      # they judge `poor match`, or `ambiguous` with a full list
+    fit: float         # the best field score among their hypotheses
+
 
 SETTLED = ('the search ended once no place it had not scored could make the answer confident: the hypotheses are '
            'those found by then')
@@ -149,38 +157,42 @@ class BranchAndBoundMatcher(Matcher):
         return Match(candidates, stats, stopped, settled)
 
     def settled_check(self, pts, d0, points: ScanPoints) -> Optional[SettledFn]:
-        """The search's early end (search.ThreadedSearch.run's `settled`): True once no
-        place it has not scored can make the answer confident - every such place's leaf
-        scores at most the highest pending bound, its refined score at most that plus
-        settle_slack (verdict.unscored_could_be_confident) - once the best leaf is known, and
-        the hypotheses found so far are judged `poor match`, or `ambiguous` with a full list
-        of hypotheses (resolving by motion follows an ambiguous answer's list: a shorter one
-        could miss the true place).
-        The rest of the band could then change the hypotheses and the confidence number,
-        never make the answer a success. Refining and judging the leaves costs up to ~20
-        ms, a slice's work: done only when the best leaf, refined at most settle_slack
-        higher, could end the search, and again only once the leaves grew by a fifth."""
+        """The search's early end (search.ThreadedSearch.run's `settled`), True once:
+        - the best leaf is known (no pending node bounds above it);
+        - no place it has not scored could be judged confident: such a place's leaf scores
+          at most the highest pending bound, its refined score at most that plus
+          settle_slack (verdict.unscored_could_be_confident);
+        - the hypotheses of exactly the leaves kept so far (what match then returns) are
+          judged `poor match`, or `ambiguous` with a full list of hypotheses (resolving by
+          motion follows an ambiguous answer's list: a shorter one could miss the true place).
+        The rest of the band could still add a rival or push a listed one out of a full
+        list - change the hypotheses and the confidence number - but not make a place it
+        has not scored a confident answer. Refining and judging the leaves costs up to ~20
+        ms, a slice's work: only done when the best leaf, refined at most settle_slack
+        higher, could end the search, and when the leaves grew by a fifth since or the
+        last judgment would now end it."""
         opt = self.options
         if opt.settle_slack >= 1.0:
             return None
         norm = 255.0 * len(pts)
-        judged = {'leaves': 0, 'settled': False, 'fit': 1.0}
+        last = SettledJudgment(leaves=-1, settled=False, fit=1.0)
 
         def settled(leaves: np.ndarray, top: int) -> bool:
+            nonlocal last
             bound = top / norm + opt.settle_slack
-            # not before the best leaf is known (no pending node bounds above it): without it the
-            # first pose could be a worse place than the whole search's (seen on a 60 deg view)
             if len(leaves) == 0 or top > leaves[:, 3].max() or \
                     unscored_could_be_confident(bound, leaves[:, 3].max() / norm + opt.settle_slack, opt):
                 return False
-            if len(leaves) > 1.2 * judged['leaves']:
+            would_end = last.settled and not unscored_could_be_confident(bound, last.fit, opt)
+            if len(leaves) != last.leaves and (len(leaves) > 1.2 * last.leaves or would_end):
                 candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, 3] / norm, pts,
                                                d0, points)
                 outcome = judge(candidates, opt).outcome if candidates else Outcome.NO_MATCH
-                judged.update(leaves=len(leaves), fit=max((c.explained for c in candidates), default=1.0),
-                              settled=outcome == Outcome.POOR_MATCH or (outcome == Outcome.AMBIGUOUS
-                                                                        and len(candidates) >= opt.hypotheses))
-            return judged['settled'] and not unscored_could_be_confident(bound, judged['fit'], opt)
+                last = SettledJudgment(len(leaves), outcome == Outcome.POOR_MATCH or (
+                    outcome == Outcome.AMBIGUOUS and len(candidates) >= opt.hypotheses),
+                    max((c.explained for c in candidates), default=1.0))
+            return len(leaves) == last.leaves and last.settled and \
+                not unscored_could_be_confident(bound, last.fit, opt)
         return settled
 
     def fit_at(self, points: ScanPoints, laser_pose: Rigid2D) -> tuple[float, float, Rigid2D]:

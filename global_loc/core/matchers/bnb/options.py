@@ -17,9 +17,10 @@ class BranchAndBoundOptions:
     sigma_cells: float = _option(1.5, 'width of the likelihood field around occupied cells, cells')
     levels: int = _option(7, 'levels of the search tree: blocks of 1 .. 2^(levels-1) cells (1 .. 7)')
     max_points: int = _option(240, 'scan points kept after the one-cell voxel filter')
-    plane_memory_mb: float = _option(320.0, 'MB the search\'s max-pooled planes may take: on a map where they would '
-                                            'take more (above ~29 Mcells) the planes of blocks of 8 cells and more '
-                                            'are stored at lower resolution - looser bounds, the same answers')
+    plane_memory_mb: float = _option(320.0, "MB the search's max-pooled planes may take: on a map where they would "
+                                            'take more (above ~29 Mcells) the planes of blocks of 8 cells and more, '
+                                            'then of 4, are stored at lower resolution until they fit (not below '
+                                            'blocks of 2: best effort) - looser bounds, more nodes, the same leaves')
     max_range: float = _option(30.0, 'm; farther returns are left out (the angle step shrinks with the '
                                      'largest range, and far returns are the least sure)')
     keep_ratio: float = _option(0.9, 'nodes bounded above keep_ratio x the best score are explored: every '
@@ -32,7 +33,7 @@ class BranchAndBoundOptions:
                                           'wrong answer more on 150 real scans (benchmarks/READING.md)')
     settle_slack: float = _option(0.05, "how far a pose's refined score may lie above its search score when the "
                                         'search decides that no place it has not scored can make the answer confident '
-                                        '(it then ends early, never with a success: README, Confidence); measured, '
+                                        '(it then ends early, never with a success: README, Concepts); measured, '
                                         'not bounded: +0.045 the most seen (benchmarks/READING.md). 1: never end early')
     max_nodes: int = _option(400000, 'node expansions after which the search stops and says it was not exhaustive')
     hypotheses: int = _option(HYPOTHESES, 'distinct poses refined, judged and returned')

@@ -28,7 +28,7 @@ from .verdict import keep_floor
 @dataclass(frozen=True)
 class SearchStats:
     """What one search did (diagnostics: the verdict reads Match.stopped)."""
-    exact: bool            # False when max_nodes stopped it: a better place may be unexplored
+    exact: bool            # False when max_nodes, the time limit or the settled end stopped it
     angles: int            # leaf headings over 360 deg
     points: int            # scan points searched with
     leaves: int            # leaves within the searched band of the best (verdict.searched_keep)
@@ -51,7 +51,7 @@ class SearchRun(NamedTuple):
     leaves: np.ndarray       # rows u, v, angle index, raw score: the leaves in the best's band, in pose order
     per_level: np.ndarray    # expansions per level
     exact: bool              # the whole band was searched
-    settled: bool            # `settled` ended the search: the band was not all searched, the answer could not change
+    settled: bool            # `settled` ended it: the band not all searched, the answer not to become confident
 
 
 def search_threads() -> int:
@@ -120,9 +120,10 @@ class ThreadedSearch:
                 break
             if settled is not None:
                 top = max((int(h[0][0]) >> 3 for h in heaps if h[2][0] > 0), default=-1)   # (heap_key)
-                if settled(kept_leaves(found, space, shared_best[0], tables.du.shape[1]), top):
-                    return SearchRun(kept_leaves(found, space, shared_best[0], tables.du.shape[1]),
-                                     np.sum(per_level, axis=0)[:top_level + 1], False, True)
+                kept = kept_leaves(found, space, shared_best[0], tables.du.shape[1])
+                if settled(kept, top):
+                    return SearchRun(kept, np.sum(per_level, axis=0)[:top_level + 1], False, True)
+                found = [kept]         # what is kept now is all a later slice needs (the floor only rises)
             for k in range(threads):      # an idle thread takes half of the fullest heap
                 if done[k]:
                     j = max(range(threads), key=lambda i: heaps[i][2][0])

@@ -40,18 +40,33 @@ def keep_floor(space, best, n_points):
     return np.int64(math.ceil(searched_keep(fit, space.keep_ratio, space.min_confidence, space.band_allowance) * best))
 
 
+def explained_share(fit: float) -> float:
+    """How much of the scan the map explains at a field score: (fit - 0.3) / 0.3, in [0, 1]
+    (searched_keep, compiled, writes the same)."""
+    return float(np.clip((fit - 0.3) / 0.3, 0.0, 1.0))
+
+
+def needed_lead(explained: float, options: BranchAndBoundOptions) -> float:
+    """The lead over every other place, relative to the best, a confident answer needs
+    where the map explains `explained` of the scan (5% at a full fit)."""
+    return options.min_confidence * (1.0 - options.keep_ratio) / explained if explained > 0 else math.inf
+
+
+# judge's tolerance on the lead: a place with no rival seen leads by exactly the lead needed
+LEAD_TOLERANCE = 1e-9
+
+
 def unscored_could_be_confident(fit_bound: float, best_fit: float, options: BranchAndBoundOptions) -> bool:
     """Whether a place the search has not scored yet, whose field score (refined) is at
     most fit_bound, could be judged localized against hypotheses whose best field score
     is best_fit: it would need to explain the scan (explained >= min_confidence) and to
-    lead best_fit by the lead a confident answer needs at its fit. Both only grow with
-    the place's fit, so checking fit_bound itself settles every place below it."""
-    opt = options
-    explained = min(max((fit_bound - 0.3) / 0.3, 0.0), 1.0)
-    if explained < opt.min_confidence or explained <= 0.0:
+    lead best_fit by the lead a confident answer needs at its fit (judge, either way it
+    says localized). Both only grow with the place's fit, so checking fit_bound itself
+    settles every place below it."""
+    explained = explained_share(fit_bound)
+    if explained <= 0.0 or explained < options.min_confidence:
         return False
-    need = opt.min_confidence * (1.0 - opt.keep_ratio) / explained
-    return fit_bound * (1.0 - need) >= best_fit
+    return fit_bound * (1.0 - needed_lead(explained, options) * (1.0 - LEAD_TOLERANCE)) >= best_fit
 
 
 def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdict:
@@ -75,9 +90,8 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
         return Verdict(Outcome.NO_MATCH, 0.0, 'bnb found no pose on free space')
     best, others = candidates[0], candidates[1:]
     fit = [c.explained for c in candidates]
-    explained = float(np.clip((fit[0] - 0.3) / 0.3, 0.0, 1.0))
-    # the lead a confident answer needs at this fit
-    need = opt.min_confidence * (1.0 - opt.keep_ratio) / explained if explained > 0 else math.inf
+    explained = explained_share(fit[0])
+    need = needed_lead(explained, opt)
     capped = searched_keep(fit[0], opt.keep_ratio, opt.min_confidence, opt.band_allowance) > opt.keep_ratio
     # No other peak found means none scored above `unseen` x best (in either score).
     unseen = 1.0 - need if capped else opt.keep_ratio
@@ -87,7 +101,7 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
     fit_margin = (fit[0] - rival) / fit[0] if fit[0] > 0 else 0.0
     margin = min(rank_margin, fit_margin)
     conf = float(np.clip(margin / (1.0 - opt.keep_ratio), 0.0, 1.0)) * explained
-    if capped and margin >= need * (1.0 - 1e-9):      # (1e-9: no other place seen, margin == need)
+    if capped and margin >= need * (1.0 - LEAD_TOLERANCE):
         return Verdict(Outcome.LOCALIZED, opt.min_confidence,
                        f'localized: confidence at least {opt.min_confidence:.2f} (the search looked for other '
                        f'places only within {100 * need:.0f}% of the best, the lead that needs)')
