@@ -14,6 +14,7 @@ from global_loc.core.scan import Scan, scan_to_points
 from global_loc.core.transform import Rigid2D
 
 OPTIONS = BranchAndBoundOptions()
+SETTLING = BranchAndBoundOptions(settle_slack=0.05)      # opted into (the default, 1, never ends early)
 ANGLES = np.linspace(-2.35, 2.35, 541)
 
 
@@ -76,12 +77,12 @@ def test_the_rule_is_monotone_in_the_bound():
     (np.random.default_rng(3).uniform(0.5, 3.0, len(ANGLES)), Outcome.POOR_MATCH),
 ])
 def test_a_search_whose_answer_cannot_become_confident_ends_early(office_map, ranges, outcome):
-    """The same scan searched to the end of the band (settle_slack 1) and with the default:
+    """The same scan searched to the end of the band (settle_slack 1, the default) and with 0.05:
     the same outcome, fewer node expansions, the hypotheses found by then (a full list when
     ambiguous: resolving by motion follows it), and a message that says the search ended early."""
     whole = Localizer(office_map, LocalizerConfig(bnb=BranchAndBoundOptions(settle_slack=1.0)))
-    default = Localizer(office_map)
-    a, b = (loc.localize(scan_of(ranges), method='bnb') for loc in (whole, default))
+    settling = Localizer(office_map, LocalizerConfig(bnb=SETTLING))
+    a, b = (loc.localize(scan_of(ranges), method='bnb') for loc in (whole, settling))
     assert a.outcome == b.outcome == outcome and not b.success
     assert not a.search_stats.settled and b.search_stats.settled
     assert b.search_stats.expansions < a.search_stats.expansions
@@ -93,7 +94,7 @@ def test_the_search_is_not_settled_before_its_best_leaf_is_known(office_map):
     """settled_check's gates, on leaves given to it: with a node pending above the best
     leaf it never ends the search (the whole search could put that better place first);
     with the same leaves and nothing above them, and a poor fit, it does."""
-    matcher = BranchAndBoundMatcher(office_map)
+    matcher = BranchAndBoundMatcher(office_map, SETTLING)
     points = scan_to_points(scan_of(np.random.default_rng(3).uniform(0.5, 3.0, len(ANGLES))))
     pts = matcher.prepare(points.points)
     norm = 255 * len(pts)
@@ -102,8 +103,7 @@ def test_the_search_is_not_settled_before_its_best_leaf_is_known(office_map):
     settled = matcher.settled_check(pts, d0, points)
     assert not settled(leaves, int(0.25 * norm))     # a pending node bounds above the best leaf
     assert settled(leaves, int(0.2 * norm))          # none does; nothing unscored can explain enough
-    assert BranchAndBoundMatcher(office_map, BranchAndBoundOptions(settle_slack=1.0)).settled_check(
-        pts, d0, points) is None
+    assert BranchAndBoundMatcher(office_map).settled_check(pts, d0, points) is None     # the default: never
 
 
 def test_a_settled_search_is_never_judged_a_success(office_map):

@@ -1,8 +1,8 @@
 """Issue 27: the settled end of the search, A/B in one process on the same trials.
 
 For each trial, bnb runs twice on one matcher (one precomputation), interleaved:
-A = the search before it (settle_slack 1: never ends early), B = the default
-(settle_slack 0.05: ends once no place it has not scored can make the answer confident).
+A = the whole band (settle_slack 1, the default: never ends early), B = --slack (0.05:
+ends once no place it has not scored can make the answer confident).
 Rows (bench.worker.run_job's fields plus the arm) go to rows.jsonl; summarize.py reads them.
 
     python benchmarks/results/settle/settle_ab.py --suites changed --changed-poses 4 --out <dir>
@@ -34,6 +34,7 @@ def main(argv=None) -> int:
     p.add_argument('--scans-per-log', type=int, default=12)
     p.add_argument('--seed', type=int, default=2015)
     p.add_argument('--threads', type=int, default=2, help='search threads (cv2.setNumThreads)')
+    p.add_argument('--slack', type=float, default=0.05, help="B's settle_slack")
     p.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'))
     p.add_argument('--out', required=True)
     args = p.parse_args(argv)
@@ -52,7 +53,8 @@ def main(argv=None) -> int:
                 loc = worker._LOCALIZERS[trial.map_name]
             m = loc.matcher('bnb')
             default = m.options
-            for arm, opts in (('A', replace(default, settle_slack=1.0)), ('B', default)):
+            arms = (('A', replace(default, settle_slack=1.0)), ('B', replace(default, settle_slack=args.slack)))
+            for arm, opts in arms:
                 m.options = opts
                 row = worker.run_job((i, trial, 'bnb'))
                 row.update(arm=arm, settle_slack=opts.settle_slack)

@@ -31,10 +31,11 @@ class BranchAndBoundOptions:
                                           '1 (the default) is always the whole keep_ratio band; at the other '
                                           'defaults 0.03 is 13-20% faster but can change answers - one confident '
                                           'wrong answer more on 150 real scans (benchmarks/READING.md)')
-    settle_slack: float = _option(0.05, "how far a pose's refined score may lie above its search score when the "
-                                        'search decides that no place it has not scored can make the answer confident '
-                                        '(it then ends early, never with a success: README, Concepts); measured, '
-                                        'not bounded: +0.045 the most seen (benchmarks/READING.md). 1: never end early')
+    settle_slack: float = _option(1.0, "end the search early (never with a success) once no place it has not "
+                                       "scored could make the answer confident, allowing this much for a pose's "
+                                       'refined score above its search score (0.05: the most seen was +0.045); 1 '
+                                       '(the default): never - an early ambiguous answer may lack the true place '
+                                       '(benchmarks/READING.md)')
     max_nodes: int = _option(400000, 'node expansions after which the search stops and says it was not exhaustive')
     hypotheses: int = _option(HYPOTHESES, 'distinct poses refined, judged and returned')
     distinct_m: float = _option(DISTINCT_M, 'm; poses closer than this (and distinct_angle) are one hypothesis: '
