@@ -92,16 +92,21 @@ def build(args):
     return trials, maps
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser()
-    p.add_argument('--suites', default='sim,cut,prior,carmen,changed')
+def add_trial_arguments(p: argparse.ArgumentParser, suites: str, seed: int, threads: int) -> None:
+    """The options `build` reads, and the search threads (shared with settle/settle_ab.py)."""
+    p.add_argument('--suites', default=suites)
     p.add_argument('--poses', type=int, default=6)
     p.add_argument('--changed-poses', type=int, default=4)
     p.add_argument('--scans-per-log', type=int, default=12)
-    p.add_argument('--seed', type=int, default=0)
-    p.add_argument('--threads', type=int, default=1, help='search threads (cv2.setNumThreads)')
-    p.add_argument('--allowance', type=float, default=0.03, help="B's band_allowance")
+    p.add_argument('--seed', type=int, default=seed)
+    p.add_argument('--threads', type=int, default=threads, help='search threads (cv2.setNumThreads)')
     p.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'))
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser()
+    add_trial_arguments(p, 'sim,cut,prior,carmen,changed', 0, 1)
+    p.add_argument('--allowance', type=float, default=0.03, help="B's band_allowance")
     p.add_argument('--out', default=os.path.dirname(os.path.abspath(__file__)))
     args = p.parse_args(argv)
     args.suites = args.suites.split(',')

@@ -21,21 +21,13 @@ import cv2
 from global_loc.bench import worker
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'band'))
-from band_ab import build  # noqa: E402  (the band A/B's trials: the same suites, seeds and counts)
-
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+from band_ab import add_trial_arguments, build  # noqa: E402  (the band A/B's trials: the same suites and counts)
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser()
-    p.add_argument('--suites', default='changed')
-    p.add_argument('--poses', type=int, default=6)
-    p.add_argument('--changed-poses', type=int, default=4)
-    p.add_argument('--scans-per-log', type=int, default=12)
-    p.add_argument('--seed', type=int, default=2015)
-    p.add_argument('--threads', type=int, default=2, help='search threads (cv2.setNumThreads)')
+    add_trial_arguments(p, 'changed', 2015, 2)
     p.add_argument('--slack', type=float, default=0.05, help="B's settle_slack")
-    p.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'))
     p.add_argument('--out', required=True)
     args = p.parse_args(argv)
     args.suites = args.suites.split(',')
