@@ -92,6 +92,14 @@ def build(args):
     return trials, maps
 
 
+def trial_matcher(i, trial):
+    """The bnb matcher of the trial's map in this process (shared with settle/settle_ab.py);
+    the first time, a localization of the trial builds it (and compiles numba's kernels)."""
+    if trial.map_name not in worker._LOCALIZERS:
+        worker.run_job((i, trial, 'bnb'))
+    return worker._LOCALIZERS[trial.map_name].matcher('bnb')
+
+
 def add_trial_arguments(p: argparse.ArgumentParser, suites: str, seed: int, threads: int) -> None:
     """The options `build` reads, and the search threads (shared with settle/settle_ab.py)."""
     p.add_argument('--suites', default=suites)
@@ -118,11 +126,7 @@ def main(argv=None) -> int:
     t0 = time.time()
     with open(os.path.join(args.out, 'rows.jsonl'), 'w') as out:
         for i, trial in enumerate(trials):
-            loc = worker._LOCALIZERS.get(trial.map_name)
-            if loc is None:
-                worker.run_job((i, trial, 'bnb'))      # builds the Localizer and its matcher (first time: numba)
-                loc = worker._LOCALIZERS[trial.map_name]
-            m = loc.matcher('bnb')
+            m = trial_matcher(i, trial)
             if trial.map_name not in recorders:
                 recorders[trial.map_name] = (PeakRecorder(m), m.options)
             rec, default = recorders[trial.map_name]

@@ -21,7 +21,7 @@ import cv2
 from global_loc.bench import worker
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'band'))
-from band_ab import add_trial_arguments, build  # noqa: E402  (the band A/B's trials: the same suites and counts)
+from band_ab import add_trial_arguments, build, trial_matcher  # noqa: E402  (the band A/B's trials: the same suites and counts)
 
 
 def main(argv=None) -> int:
@@ -39,11 +39,7 @@ def main(argv=None) -> int:
     t0 = time.time()
     with open(os.path.join(args.out, 'rows.jsonl'), 'w') as out:
         for i, trial in enumerate(trials):
-            loc = worker._LOCALIZERS.get(trial.map_name)
-            if loc is None:
-                worker.run_job((i, trial, 'bnb'))      # builds the Localizer and its matcher (first time: numba)
-                loc = worker._LOCALIZERS[trial.map_name]
-            m = loc.matcher('bnb')
+            m = trial_matcher(i, trial)
             default = m.options
             arms = (('A', replace(default, settle_slack=1.0)), ('B', replace(default, settle_slack=args.slack)))
             for arm, opts in arms:
