@@ -237,3 +237,81 @@ def test_a_server_gone_mid_goal_is_a_clear_error(tmp_path):
     finally:
         localizer.close()
         server.stop()
+
+
+class LossyServer:
+    """A stand-in global_loc server in this process that loses answers as Fast DDS does to a
+    client it has not matched yet (ros2/rmw_fastrtps#751): the first goal request gets no
+    answer and never runs (rclpy's ActionServer after a failed send_goal_response), and the
+    first result request gets no answer. It answers ~/get_state 'active'. Fault injection
+    on the server side; the client under test is the real API."""
+
+    def __init__(self, env):
+        import rclpy
+        from lifecycle_msgs.msg import State
+        from lifecycle_msgs.srv import GetState
+        from rclpy.action import ActionServer
+        from rclpy.executors import SingleThreadedExecutor
+
+        from global_loc_interfaces.action import Localize
+        self.goal_requests, self.result_requests, self.executed = 0, 0, 0
+        outer = self
+
+        class Lossy(ActionServer):
+            async def _execute_goal_request(self, request):
+                outer.goal_requests += 1
+                if outer.goal_requests > 1:
+                    await super()._execute_goal_request(request)
+
+            async def _execute_get_result_request(self, request):
+                outer.result_requests += 1
+                if outer.result_requests > 1:
+                    await super()._execute_get_result_request(request)
+
+        def execute(goal_handle):
+            outer.executed += 1
+            goal_handle.succeed()
+            return Localize.Result(outcome=int(Outcome.LOCALIZED), success=True, message='localized (stand-in)')
+
+        def get_state(request, response):
+            response.current_state = State(id=State.PRIMARY_STATE_ACTIVE, label='active')
+            return response
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=int(env['ROS_DOMAIN_ID']))
+        self.node = rclpy.create_node('global_loc_server', context=self.context)
+        self.server = Lossy(self.node, Localize, 'localize', execute)
+        self.node.create_service(GetState, '~/get_state', get_state)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.stopping = threading.Event()
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self):
+        while not self.stopping.is_set():
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self):
+        self.stopping.set()
+        self.thread.join(5.0)
+        self.server.destroy()
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+def test_a_goal_request_or_result_lost_in_discovery_is_asked_again():
+    """The CI failure of stop 31: a goal sent right after wait_for_server went unanswered
+    (GoalUnanswered after 10 s). A request unanswered while the server answers ~/get_state
+    is sent again under a new goal id, and a lost result is asked for again once the
+    status says the goal ended; the lost goal never ran, so the goal runs once."""
+    env = isolated_env()
+    server = LossyServer(env)
+    localizer = ApiLocalizer(env, server_timeout_s=20.0)
+    try:
+        result = localizer.api.localize(timeout_s=1.0)
+        assert result.outcome == Outcome.LOCALIZED and result.message == 'localized (stand-in)', result
+        assert (server.goal_requests, server.executed, server.result_requests) == (2, 1, 2)
+    finally:
+        localizer.close()
+        server.close()

@@ -1,6 +1,7 @@
 """The ROS-free parts of keeping a robot localized: the supervisor's states and guards,
 odometry by stamp, and the motion resolver on ray-cast scans."""
 import math
+import threading
 
 import numpy as np
 import pytest
@@ -8,7 +9,7 @@ import pytest
 from conftest import assert_pose_near, symmetric_room
 from global_loc.core.localizer import Localizer
 from global_loc.core.motion import MotionResolver
-from global_loc.core.outcome import Outcome
+from global_loc.core.outcome import CanceledError, Outcome
 from global_loc.core.pose_history import PoseHistory
 from global_loc.core.scan import scan_to_points
 from global_loc.core.supervisor import Health, Supervisor, SupervisorConfig
@@ -105,6 +106,20 @@ def test_pose_history_interpolates_and_gives_the_motion_between_stamps():
     assert (Rigid2D(0.2, 0.0, 0.2) * motion).as_tuple() == pytest.approx((0.5, 0.0, 0.5))
     h.add(10.0, Rigid2D(7.0, 0.0, 0.0))                       # 9 s later: the old ones (> keep_s) go
     assert h.at(0.0).as_tuple() == pytest.approx((7.0, 0.0, 0.0))
+
+
+def test_pose_history_waits_for_a_pose_still_on_its_way():
+    """The odometry of a moment comes after the scan of it: a reader waits for it."""
+    h = PoseHistory()
+    h.add(1.0, Rigid2D(1.0, 0.0, 0.0))
+    assert h.wait_until(1.0) and not h.wait_until(1.1, timeout_s=0.05)
+    later = threading.Timer(0.1, h.add, (1.2, Rigid2D(1.2, 0.0, 0.0)))
+    later.start()
+    assert h.wait_until(1.1, timeout_s=5.0)
+    assert h.at(1.1).x == pytest.approx(1.1)         # interpolated, not the pose held at 1.0
+    with pytest.raises(CanceledError):
+        h.wait_until(9.0, timeout_s=5.0, cancelled=lambda: True)
+    assert not PoseHistory().wait_until(timeout_s=0.05)       # none at all
 
 
 def test_motion_never_picks_one_of_perfect_twins():

@@ -19,13 +19,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Callable, Optional
 
 import numpy as np
 
 from .localizer import Hypothesis, LocalizationResult
+from .matchers.bnb.verdict import explained_share, needed_lead
+from .outcome import Outcome
 from .scan import ScanPoints
 from .transform import Rigid2D, pose_correct
 
@@ -91,8 +93,15 @@ class MotionResolver:
             score, track.pose = fit(track.pose * motion)
             track.fits.append(score)
         self.tracks.sort(key=lambda t: -t.total)
-        best = self.tracks[0].evidence
-        self.tracks = [t for t in self.tracks if t.evidence >= self.config.keep * best]
+        # Hypotheses that slid onto one place (two 1 m apart on a wall both refined onto the
+        # right spot) are one: a twin of the leader would otherwise stand as the "next" and
+        # hold back a lead over the real rivals. The one with the larger sum stays.
+        merged: list[Track] = []
+        for track in self.tracks:
+            if not any(pose_correct(track.pose, kept.pose) for kept in merged):
+                merged.append(track)
+        best = merged[0].evidence
+        self.tracks = [t for t in merged if t.evidence >= self.config.keep * best]
         return self.winner()
 
     def winner(self) -> Optional[Track]:
@@ -116,18 +125,37 @@ def fuse_scans(scans: list[tuple[Rigid2D, ScanPoints]]) -> ScanPoints:
 
 
 def settle(localizer, seen: list[tuple[Rigid2D, ScanPoints]], base_T_laser: Rigid2D,
-           candidate: Optional[Rigid2D] = None):
+           candidate: Optional[Rigid2D] = None, beaten: Sequence[Rigid2D] = ()):
     """The scans seen on the way (laser poses in the odometry frame, points), fused into
     one view and searched over the whole map: the result when it is confident and agrees
     with `candidate` (the leader of the followed hypotheses, when there is one), else None.
     A leader alone is never enough: a hypothesis can slide along a featureless wall while
-    it is followed; the fused view does not depend on the followed hypotheses at all."""
+    it is followed; the fused view does not depend on the followed hypotheses at all.
+
+    With a leader, the fused view may also confirm it when it ranks the leader's place
+    first and every place it finds as close is one of `beaten`, the followed hypotheses
+    the leader outscored by the lead a winner needs: what tells twins apart (a box seen
+    while facing one way) is a small share of a view fused over a whole turn, so the
+    fused view alone separates them by less than a single scan's confident margin, while
+    the summed fits have already separated exactly those places."""
     if len(seen) < 2:
         return None
     fused = localizer.localize_points(fuse_scans(seen[::3] + seen[-1:]), 'bnb', base_T_laser=base_T_laser)
-    if not fused.success or (candidate is not None and not pose_correct(fused.pose, candidate)):
+    if fused.pose is None or (candidate is not None and not pose_correct(fused.pose, candidate)):
         return None
-    return fused
+    if fused.success:
+        return fused
+    if candidate is None or fused.outcome != Outcome.AMBIGUOUS or not fused.hypotheses:
+        return None
+    options = localizer.matcher(FOLLOW_METHOD).options
+    best = fused.hypotheses[0].score
+    need = needed_lead(explained_share(best), options)
+    close = [h.pose for h in fused.hypotheses[1:] if h.score >= best * (1.0 - need)]
+    if not all(any(pose_correct(pose, b) for b in beaten) for pose in close):
+        return None
+    return dataclasses.replace(fused, outcome=Outcome.LOCALIZED, message=(
+        f'localized: the fused view ranks it first, and the {len(close)} place(s) within {100 * need:.0f}% of it '
+        f'are hypotheses it led while followed'))
 
 
 # Following uses bnb whatever method answered the single scan: the per-scan fit (fit_at,
@@ -186,7 +214,8 @@ class HypothesisFollower:
         leader = self.resolver.update(motion, pose_fitter(self.matcher, obs.points, self.base_T_laser))
         if leader is not None and obs.stamp - self.checked >= SETTLE_PERIOD_S:
             self.checked = obs.stamp
-            self.winner = settle(self.localizer, self.seen, self.base_T_laser, leader.pose)
+            self.winner = settle(self.localizer, self.seen, self.base_T_laser, leader.pose,
+                                 [t.pose for t in self.resolver.tracks if t is not leader])
         return self.winner is not None
 
     def follow(self, observations: Iterable[Observation],

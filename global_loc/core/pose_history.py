@@ -1,12 +1,17 @@
 """The recent poses of a moving frame (odometry), looked up at any stamp: the motion
 between two moments - the localizer's pose and a scan, two scans - is then the motion
-between exactly those moments, not between whenever the messages happened to arrive."""
+between exactly those moments, not between whenever the messages happened to arrive.
+A reader can wait for the poses still on their way (`wait_until`): a robot publishes the
+odometry of a moment after the scan of it, or on another topic that arrives later."""
 from __future__ import annotations
 
 import bisect
+import math
 import threading
-from typing import Optional
+import time
+from typing import Callable, Optional
 
+from .outcome import CanceledError
 from .transform import Rigid2D, normalize_angle
 
 
@@ -15,7 +20,7 @@ class PoseHistory:
         self.keep_s = keep_s
         self._stamps: list[float] = []
         self._poses: list[Rigid2D] = []
-        self._lock = threading.Lock()
+        self._lock = threading.Condition()
 
     def add(self, stamp: float, pose: Rigid2D) -> None:
         """A pose at `stamp` (seconds); older than keep_s behind the newest are forgotten."""
@@ -26,6 +31,23 @@ class PoseHistory:
             self._poses.append(pose)
             cut = bisect.bisect_left(self._stamps, stamp - self.keep_s)
             del self._stamps[:cut], self._poses[:cut]
+            self._lock.notify_all()
+
+    def wait_until(self, stamp: float = -math.inf, timeout_s: float = 0.0,
+                   cancelled: Callable[[], bool] = lambda: False, poll_s: float = 0.05) -> bool:
+        """Whether the history reaches `stamp` (its newest pose is at or after it; the default:
+        holds any pose), waiting up to `timeout_s` for it; raises CanceledError as soon as
+        `cancelled()` says so."""
+        deadline = time.monotonic() + timeout_s
+        with self._lock:
+            while not (self._stamps and self._stamps[-1] >= stamp):
+                if cancelled():
+                    raise CanceledError()
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return False
+                self._lock.wait(min(remaining, poll_s))
+            return True
 
     def newest_stamp(self) -> Optional[float]:
         """The stamp of the newest pose, None when empty."""

@@ -21,19 +21,15 @@ turning the robot.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import math
 import signal
 import threading
 import time
 from typing import Callable, Optional
 
-import numpy as np
-from action_msgs.msg import GoalStatus
 from action_msgs.srv import CancelGoal
 from geometry_msgs.msg import Pose2D
 from lifecycle_msgs.srv import GetState
-from rclpy import signals as rclpy_signals
 from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -42,15 +38,14 @@ from std_srvs.srv import Trigger
 
 from global_loc_interfaces.action import Localize
 
-from ..core.outcome import Outcome
 from ..core.transform import Rigid2D
-from .convert import pose_from_msg, stamp_seconds
+from .cancel_signals import signals_routed_to
+from .localize_result import STATUS_NAMES, LocalizeResult
 
 SERVER_GONE_S = 3.0    # the server absent from the ROS graph this long: it is gone (no answer will come)
 STATE_CALL_S = 2.0     # wait_until_active: one ~/get_state call's answer, before it asks again
 CANCEL_WAIT_S = 2.0    # an interrupted goal: how long to wait for the server to accept the cancel
-STATUS_NAMES = {GoalStatus.STATUS_SUCCEEDED: 'succeeded', GoalStatus.STATUS_ABORTED: 'aborted',
-                GoalStatus.STATUS_CANCELED: 'canceled'}
+GOAL_ANSWER_S = 2.0    # a spinning server answers a goal request in milliseconds: after this, was it lost?
 
 
 class GlobalLocError(Exception):
@@ -69,61 +64,14 @@ class ServerGone(GlobalLocError):
 
 
 class GoalUnanswered(GlobalLocError):
-    """The server did not answer the goal request in time (lost in discovery right after the server
-    started, or it was stopping): wait_until_active, then ask again."""
+    """The server did not answer the goal request in time, nor ~/get_state (so it was not sent
+    again): it is still starting, or stopping; wait_until_active, then ask again."""
     label = 'goal_unanswered'
 
 
 class GoalRejected(GlobalLocError):
     """The server rejected the goal."""
     label = 'goal_rejected'
-
-
-@dataclasses.dataclass(frozen=True)
-class LocalizeResult:
-    """The server's answer to one goal (global_loc_interfaces/action/Localize's result)."""
-    outcome: Outcome
-    success: bool                  # True only when the server is confident the pose is right
-    message: str
-    pose: Optional[Rigid2D]        # the robot base in `frame_id`; None when the server has no hypothesis
-    covariance: Optional[np.ndarray]    # 3x3 (x, y, yaw), with `pose`
-    score: float
-    confidence: float
-    hypotheses: list               # [(Rigid2D, score)], best first; hypotheses[0][0] is `pose` (scores: see
-                                   # the action's hypothesis_scores - mean fits after resolving by motion)
-    scan_stamp: float              # the localized scan's stamp, s (0 when no scan was used)
-    scan_age_s: float
-    elapsed_s: float
-    status: str                    # how the action ended: succeeded | aborted | canceled
-    frame_id: str = 'map'
-
-    @staticmethod
-    def from_msg(result: Localize.Result, status: int) -> 'LocalizeResult':
-        hypotheses = [(pose_from_msg(p), float(s))
-                      for p, s in zip(result.hypotheses.poses, result.hypothesis_scores, strict=True)]
-        pose = covariance = None
-        if hypotheses:
-            pose = pose_from_msg(result.pose.pose.pose)
-            covariance = np.asarray(result.pose.pose.covariance, dtype=float).reshape(6, 6)[np.ix_([0, 1, 5],
-                                                                                                  [0, 1, 5])]
-        try:
-            outcome = Outcome(result.outcome)
-        except ValueError:      # a newer server's outcome: no pose of it can be trusted here
-            outcome = Outcome.NONE
-        return LocalizeResult(outcome, bool(result.success), result.message, pose, covariance, float(result.score),
-                              float(result.confidence), hypotheses, stamp_seconds(result.scan_stamp),
-                              float(result.scan_age_s), float(result.elapsed_s),
-                              STATUS_NAMES.get(status, str(status)), result.pose.header.frame_id or 'map')
-
-    def as_dict(self) -> dict:
-        """The client's JSON object (test_global_loc --json)."""
-        return {'outcome': self.outcome.label, 'status': self.status, 'success': self.success,
-                'message': self.message, 'score': self.score if math.isfinite(self.score) else None,
-                'confidence': self.confidence, 'elapsed_s': self.elapsed_s,
-                'hypotheses': [{**p.as_dict(), 'score': round(s, 5)} for p, s in self.hypotheses],
-                'scan_stamp': self.scan_stamp, 'scan_age_s': self.scan_age_s,
-                'pose': None if self.pose is None else self.pose.as_dict(),
-                'covariance': None if self.covariance is None else self.covariance.tolist()}
 
 
 class GlobalLocalizer(Node):
@@ -197,7 +145,7 @@ class GlobalLocalizer(Node):
         self._cancel_wanted.clear()
         self._signalled, self._running = False, True
         try:
-            with self._signals_cancel_the_goal():
+            with signals_routed_to(self._on_signal, self.cancel_signals):
                 response = self._run_goal(goal, feedback)
         finally:
             self._running = False
@@ -238,31 +186,73 @@ class GlobalLocalizer(Node):
         if self._signalled:
             raise KeyboardInterrupt('before the goal was sent')
         served = self._action.server_is_ready
-        sent = self._action.send_goal_async(goal, feedback_callback=(lambda m: feedback(m.feedback)) if feedback
-                                            else None)
-        if not self._wait(sent, served, self.server_timeout_s):
-            raise GoalUnanswered(f'the global_loc server did not answer the goal request within '
-                                 f'{self.server_timeout_s:g} s (it stopped, or the request was lost while it was '
-                                 f'starting)')
-        handle = sent.result()
+        handle = self._send_goal(goal, feedback, served)
         if handle is None or not handle.accepted:
             raise GoalRejected('the server rejected the goal')
         done = handle.get_result_async()
         cancel_sent = False
         try:
-            self._wait(done, served, stop=self._cancel_wanted.is_set)
+            done = self._wait_for_result(handle, done, served, self._cancel_wanted.is_set)
             if not done.done():
                 cancel_sent = True
                 accepted = self._request_cancel(handle, served)
                 if self._signalled:
                     raise KeyboardInterrupt('the goal was canceled' if accepted else
                                             'the goal was not canceled: the server did not confirm the cancel')
-                self._wait(done, served)        # the goal ends canceled at the search's next step
+                done = self._wait_for_result(handle, done, served)   # it ends canceled at the search's next step
         except KeyboardInterrupt:
             if not cancel_sent:
                 self._request_cancel(handle, served)
             raise
         return done.result()
+
+    def _send_goal(self, goal: Localize.Goal, feedback, served):
+        """The goal's handle (accepted or not). Fast DDS drops the answer to a client the
+        server has not matched yet (ros2/rmw_fastrtps#751: seen on a loaded CI machine right
+        after discovery), and the server then never runs that goal. So a request still
+        unanswered after GOAL_ANSWER_S while the server answers ~/get_state (it is spinning,
+        not still starting) is sent again under a new goal id; should an earlier one be
+        answered after all, the first answer is used and any other accepted goal canceled."""
+        callback = (lambda m: feedback(m.feedback)) if feedback else None
+        deadline = time.monotonic() + self.server_timeout_s
+        sent = [self._action.send_goal_async(goal, feedback_callback=callback)]
+        while not any(f.done() for f in sent):
+            wait = min(GOAL_ANSWER_S, deadline - time.monotonic())
+            if wait <= 0:
+                raise GoalUnanswered(f'the global_loc server did not answer the goal request within '
+                                     f'{self.server_timeout_s:g} s (it stopped, or it is still starting)')
+            self._wait(sent[0], served, wait, stop=lambda: any(f.done() for f in sent))
+            if not any(f.done() for f in sent) and self._answers_get_state(served, deadline):
+                self.get_logger().warn(f'no answer to the goal request within {GOAL_ANSWER_S:g} s while the server '
+                                       f'answers ~/get_state: sending it again (lost in discovery)')
+                sent.append(self._action.send_goal_async(goal, feedback_callback=callback))
+        first = next(f for f in sent if f.done())
+        for other in sent:
+            if other is not first:
+                other.add_done_callback(_cancel_if_accepted)
+        return first.result()
+
+    def _answers_get_state(self, served, deadline: float) -> bool:
+        if not self._get_state.service_is_ready():
+            return False
+        future = self._get_state.call_async(GetState.Request())
+        self._wait(future, served, max(0.0, min(STATE_CALL_S, deadline - time.monotonic())))
+        return future.done() and future.result() is not None
+
+    def _wait_for_result(self, handle, done, served, stop: Callable[[], bool] = lambda: False):
+        """Until the result comes or `stop()`; the result future. The result's
+        answer can be lost as the goal's can: a goal the status topic says has ended
+        without its result for GOAL_ANSWER_S is asked for its result again."""
+        ended_at = None
+        while not done.done() and not stop():
+            self._wait(done, served, GOAL_ANSWER_S / 4, stop=stop)
+            if done.done() or handle.status not in STATUS_NAMES:
+                continue
+            ended_at = ended_at or time.monotonic()
+            if time.monotonic() - ended_at > GOAL_ANSWER_S:
+                self.get_logger().warn('the goal ended but its result did not come: asking again')
+                done, ended_at = handle.get_result_async(), None
+        return done
 
     def _request_cancel(self, handle, served) -> bool:
         """Ask the server to cancel the goal; whether it accepted within CANCEL_WAIT_S."""
@@ -311,37 +301,9 @@ class GlobalLocalizer(Node):
         self._signalled = True
         self._cancel_wanted.set()
 
-    @contextlib.contextmanager
-    def _signals_cancel_the_goal(self):
-        """While a goal runs, `cancel_signals` cancel it instead of ending the process at
-        once. rclpy's own handlers shut every context down at the signal - the cancel could
-        not be sent - so they are set aside for these signals and reinstalled after. Only
-        the main thread owns signals: elsewhere nothing changes."""
-        if threading.current_thread() is not threading.main_thread() or not self.cancel_signals:
-            yield
-            return
-        rclpy_options = rclpy_signals.get_current_signal_handlers_options()
-        rclpy_had = _SIGNALS_OF[rclpy_options]
-        if rclpy_had:
-            rclpy_signals.uninstall_signal_handlers()
-        # a signal the process ignores (a background job's SIGINT) stays ignored
-        taken = [s for s in self.cancel_signals if signal.getsignal(s) != signal.SIG_IGN]
-        previous = {s: signal.signal(s, self._on_signal) for s in taken}
-        rclpy_keeps = rclpy_had - set(taken)
-        if rclpy_keeps:
-            rclpy_signals.install_signal_handlers(_OPTIONS_OF[frozenset(rclpy_keeps)])
-        try:
-            yield
-        finally:
-            if rclpy_keeps:
-                rclpy_signals.uninstall_signal_handlers()
-            for s, handler in previous.items():
-                signal.signal(s, handler)
-            if rclpy_had:
-                rclpy_signals.install_signal_handlers(rclpy_options)
 
-
-_Options = rclpy_signals.SignalHandlerOptions
-_SIGNALS_OF = {_Options.NO: frozenset(), _Options.SIGINT: frozenset({signal.SIGINT}),
-               _Options.SIGTERM: frozenset({signal.SIGTERM}), _Options.ALL: frozenset({signal.SIGINT, signal.SIGTERM})}
-_OPTIONS_OF = {signals: options for options, signals in _SIGNALS_OF.items()}
+def _cancel_if_accepted(future) -> None:
+    """A goal request answered after another one was used: cancel it if it was accepted."""
+    handle = future.result()
+    if handle is not None and handle.accepted:
+        handle.cancel_goal_async()

@@ -21,26 +21,51 @@ from ..core.scan import ScanError, scan_to_points
 from ..core.transform import Rigid2D
 from .convert import scan_from_msg, stamp_seconds
 
-ODOMETRY_GRACE_S = 2.0     # a moment for a late first odometry message
+# How long a scan waits for the odometry of its own stamp. A robot publishes the odometry
+# of a moment after the scan of it (the simulator: in the same tick, just after), and a
+# loaded machine delivers it later still; taken before it arrives, the pose would be the
+# previous one, a tick of turning off (0.04 rad at 0.4 rad/s), on some scans and not on
+# others - enough to blur the fused view that must confirm a winner.
+ODOMETRY_LAG_S = 0.5
+
+
+class OdometryAtStamp:
+    """The odometry pose at a scan's stamp, once the odometry has reached that stamp (up to
+    ODOMETRY_LAG_S); odometry stamped behind the scans for longer (another clock, a stalled
+    driver) is held at its newest pose, said once in the log."""
+
+    def __init__(self, odometry: PoseHistory, topic: str, cancelled: Callable[[], bool], log: Callable[[str], None]):
+        self.odometry, self.topic, self.cancelled, self.log = odometry, topic, cancelled, log
+        self.held = 0
+
+    def __call__(self, stamp: float) -> Rigid2D:
+        if not self.odometry.wait_until(stamp, ODOMETRY_LAG_S, self.cancelled):
+            self.held += 1
+            if self.held == 1:
+                newest = self.odometry.newest_stamp()
+                self.log(f'the odometry on {self.topic} is {stamp - newest:.2f} s behind a scan after waiting '
+                         f'{ODOMETRY_LAG_S:g} s: its newest pose is used (are both stamped by the same clock?)')
+        return self.odometry.at(stamp)
 
 
 def resolve_by_motion(result: LocalizationResult, first_msg, base_T_laser: Rigid2D, duration_s: float,
                       rotate_in_place: bool, *, localizer, scans: NewestMessage, odometry: PoseHistory,
-                      odometry_arrived: Callable[[float], bool], publish_cmd_vel: Callable[[Twist], None],
+                      odometry_wait_s: float, publish_cmd_vel: Callable[[Twist], None],
                       rotate_speed: float, odom_topic: str, cancelled: Callable[[], bool], feedback,
                       log: Callable[[str], None]) -> tuple[LocalizationResult, object]:
     """Follow `result`'s hypotheses over the scans arriving for up to `duration_s`: (the
     winner as a localized result, or the result still ambiguous with the hypotheses left;
     the last scan message used - the poses are the robot's at its stamp).
 
-    `odometry_arrived(timeout_s)`: whether any odometry has come, waiting up to timeout_s
-    (raises CanceledError on cancel); `publish_cmd_vel(twist)`: the cmd_vel publisher's
-    publish; `feedback(progress, stage, best_score, hypotheses)` as the action's."""
+    `odometry_wait_s`: how long to wait for a first odometry message (a late odometry
+    source: as long as a request waits for a scan); `publish_cmd_vel(twist)`: the cmd_vel
+    publisher's publish; `feedback(progress, stage, best_score, hypotheses)` as the action's."""
     first_stamp = stamp_seconds(first_msg.header.stamp)
-    start_odometry = odometry.at(first_stamp) if odometry_arrived(ODOMETRY_GRACE_S) else None
-    if start_odometry is None:
-        return dataclasses.replace(result, message=f'{result.message} (no odometry on {odom_topic}: '
-                                                   f'cannot resolve by motion)'), first_msg
+    if not odometry.wait_until(timeout_s=odometry_wait_s, cancelled=cancelled):
+        return dataclasses.replace(result, message=f'{result.message} (no odometry on {odom_topic} within '
+                                                   f'{odometry_wait_s:g} s: cannot resolve by motion)'), first_msg
+    at_stamp = OdometryAtStamp(odometry, odom_topic, cancelled, log)
+    start_odometry = at_stamp(first_stamp)
     follower = HypothesisFollower(result, localizer, base_T_laser, start_odometry, first_stamp)
     log(f'resolving by motion: {len(follower.resolver.tracks)} hypotheses, up to {duration_s:.0f} s'
         + (', turning in place' if rotate_in_place else ''))
@@ -60,7 +85,7 @@ def resolve_by_motion(result: LocalizationResult, first_msg, base_T_laser: Rigid
                 points = scan_to_points(scan_from_msg(msg))
             except ScanError:
                 continue        # the odometry keeps the motion since the last scan used
-            yield Observation(points, odometry.at(stamp), stamp, msg)
+            yield Observation(points, at_stamp(stamp), stamp, msg)
 
     def on_step(f: HypothesisFollower):
         tracks = f.resolver.tracks

@@ -65,7 +65,6 @@ class GlobalLocServer(LifecycleNode):
         self.maps: MapSlot[Localizer] = MapSlot(self.build_localizer, self.on_map_change)
         self.sensors = SensorInputs()                          # every sensor's newest message (the view)
         self.scans: NewestMessage[LaserScan] = NewestMessage()       # the primary laser's (watch, resolve-by-motion)
-        self.odom: NewestMessage[Odometry] = NewestMessage()        # the newest odometry (has any come?)
         self.odom_history = PoseHistory()                      # odometry by stamp
         self.errors: dict[str, int] = {}                       # callback name -> exceptions caught
         self.pubs: dict = {}
@@ -256,7 +255,6 @@ class GlobalLocServer(LifecycleNode):
 
     def on_odom(self, msg: Odometry) -> None:
         self.odom_history.add(stamp_seconds(msg.header.stamp), pose_from_msg(msg.pose.pose))
-        self.odom.put(msg)
 
     def fit_at(self, scan_msg, pose):
         """The watch's fit of a primary-laser scan at a base pose (None while no map is ready)."""
@@ -286,8 +284,7 @@ class GlobalLocServer(LifecycleNode):
         c = self.config
         return resolve_by_motion(
             result, msg, base_T_laser, request.resolve_by_motion_s, request.rotate_in_place, localizer=localizer,
-            scans=self.scans, odometry=self.odom_history,
-            odometry_arrived=lambda timeout_s: self.odom.wait_after(0.0, timeout_s, cancelled) is not None,
+            scans=self.scans, odometry=self.odom_history, odometry_wait_s=request.scan_timeout_s,
             publish_cmd_vel=self.cmd_vel_pub.publish, rotate_speed=c['rotate_speed'], odom_topic=c['odom_topic'],
             cancelled=cancelled, feedback=feedback, log=self.get_logger().info)
 
