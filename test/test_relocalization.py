@@ -172,12 +172,12 @@ def start_world(tmp_path, processes, occupancy_map, start: Rigid2D, *laser) -> t
 
 
 def test_an_ambiguous_aisle_end_is_settled_by_turning_in_place(tmp_path, processes):
-    """One turn settles this aisle end in 38 of 40 simulated noise seeds (test_follow.py's
-    follow_a_turn over seeds 1-40, measured once, not kept as a test); in the other two
-    the true place is not among the single scan's 8 hypotheses and the turn ends
-    ambiguous, publishing nothing. The simulator's scans differ from run to run here (the
-    goal takes whichever comes next), so a turn that ends ambiguous is asked for once
-    more, as a robot would; a wrong or missing answer twice fails."""
+    """One turn settles this aisle end in 40 of 40 simulated noise seeds offline
+    (test_follow.py's follow_a_turn over seeds 1-40, measured once, not kept as a test;
+    38 of 40 before the fused view's places were taken up). The simulator's scans and
+    their timing differ from run to run here (the goal takes whichever scan comes next),
+    so a turn that ends ambiguous - publishing nothing - is asked for once more, as a
+    robot would; a wrong answer, or ambiguous twice, fails."""
     env, amcl = start_world(tmp_path, processes, aisles_with_a_box(), Rigid2D(4.0, 4.3, math.pi / 2), *LASER_180)
     alone = json.loads(run_client(env, '--json', '--timeout', '10', '--no-publish').stdout)
     assert alone['outcome'] == 'ambiguous' and len(alone['hypotheses']) >= 2, alone

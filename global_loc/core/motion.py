@@ -104,9 +104,13 @@ class MotionResolver:
         self.tracks = [t for t in merged if t.evidence >= self.config.keep * best]
         return self.winner()
 
+    def moved_enough(self) -> bool:
+        """Whether the robot has driven or turned far enough for a winner."""
+        return self.travelled >= self.config.min_travel_m or self.turned >= self.config.min_turn
+
     def winner(self) -> Optional[Track]:
         c = self.config
-        if not self.tracks or (self.travelled < c.min_travel_m and self.turned < c.min_turn):
+        if not self.tracks or not self.moved_enough():
             return None
         best = self.tracks[0]
         second = self.tracks[1].total if len(self.tracks) > 1 else 0.0
@@ -124,44 +128,59 @@ def fuse_scans(scans: list[tuple[Rigid2D, ScanPoints]]) -> ScanPoints:
     return ScanPoints(points, max(reach, max(p.range_max for _, p in scans)), len(points), beams=False)
 
 
-def settle(localizer, seen: list[tuple[Rigid2D, ScanPoints]], base_T_laser: Rigid2D,
-           candidate: Optional[Rigid2D] = None, beaten: Sequence[Rigid2D] = ()):
+def search_fused_view(localizer, seen: list[tuple[Rigid2D, ScanPoints]], base_T_laser: Rigid2D):
     """The scans seen on the way (laser poses in the odometry frame, points), fused into
-    one view and searched over the whole map: the result when it is confident and agrees
-    with `candidate` (the leader of the followed hypotheses, when there is one), else None.
-    A leader alone is never enough: a hypothesis can slide along a featureless wall while
-    it is followed; the fused view does not depend on the followed hypotheses at all.
-
-    With a leader, the fused view may also confirm it when it ranks the leader's place
-    first and every place it finds as close is one of `beaten`, the followed hypotheses
-    the leader outscored by the lead a winner needs: what tells twins apart (a box seen
-    while facing one way) is a small share of a view fused over a whole turn, so the
-    fused view alone separates them by less than a single scan's confident margin, while
-    the summed fits have already separated exactly those places."""
+    one view and searched over the whole map (None before two scans)."""
     if len(seen) < 2:
         return None
-    fused = localizer.localize_points(fuse_scans(seen[::3] + seen[-1:]), 'bnb', base_T_laser=base_T_laser)
-    if fused.pose is None or (candidate is not None and not pose_correct(fused.pose, candidate)):
+    return localizer.localize_points(fuse_scans(seen[::3] + seen[-1:]), FOLLOW_METHOD, base_T_laser=base_T_laser)
+
+
+def close_places(fused, options) -> list[Rigid2D]:
+    """The fused view's best place and every other within the lead a confident answer needs."""
+    if not fused.hypotheses:
+        return []
+    best = fused.hypotheses[0].score
+    need = needed_lead(explained_share(best), options)
+    return [h.pose for h in fused.hypotheses if h.score >= best * (1.0 - need)]
+
+
+def confirm(fused, options, candidate: Optional[Rigid2D] = None, beaten: Sequence[Rigid2D] = ()):
+    """The fused view's result when it confirms `candidate` (the leader of the followed
+    hypotheses, when there is one), else None: it must be confident and agree with it. A
+    leader alone is never enough: a hypothesis can slide along a featureless wall while it
+    is followed; the fused view does not depend on the followed hypotheses at all.
+
+    With a leader, the fused view also confirms it when it ranks the leader's place first
+    and every place it finds as close is one of `beaten`, the followed hypotheses the
+    leader outscored by the lead a winner needs: what tells twins apart (a box seen while
+    facing one way) is a small share of a view fused over a whole turn, so the fused view
+    alone separates them by less than a single scan's confident margin, while the summed
+    fits have already separated exactly those places."""
+    if fused is None or fused.pose is None or (candidate is not None and not pose_correct(fused.pose, candidate)):
         return None
     if fused.success:
         return fused
-    if candidate is None or fused.outcome != Outcome.AMBIGUOUS or not fused.hypotheses:
+    # Only where the map explains the fused view (its lead needed is the least, 5%) and the
+    # leader's sum has had lead_scans scans to build (`beaten` is empty before): a poorly
+    # explained view of a few scans (a real log's 1 m between scans) may rank a place first
+    # that neither the view nor the sums can vouch for, the true one found by neither.
+    if candidate is None or not beaten or fused.outcome != Outcome.AMBIGUOUS or \
+            explained_share(fused.hypotheses[0].score) < 1.0:
         return None
-    options = localizer.matcher(FOLLOW_METHOD).options
-    best = fused.hypotheses[0].score
-    need = needed_lead(explained_share(best), options)
-    close = [h.pose for h in fused.hypotheses[1:] if h.score >= best * (1.0 - need)]
+    close = close_places(fused, options)[1:]
     if not all(any(pose_correct(pose, b) for b in beaten) for pose in close):
         return None
     return dataclasses.replace(fused, outcome=Outcome.LOCALIZED, message=(
-        f'localized: the fused view ranks it first, and the {len(close)} place(s) within {100 * need:.0f}% of it '
-        f'are hypotheses it led while followed'))
+        f'localized: the fused view ranks it first, and the {len(close)} place(s) as close are hypotheses it led '
+        f'while followed'))
 
 
 # Following uses bnb whatever method answered the single scan: the per-scan fit (fit_at,
 # a refinement within a cell on bnb's precomputed field) has no counterpart in the thesis
 # matchers, and `settle` searches the whole map about once a second while the robot moves,
 # which only bnb does in tens of milliseconds; the lead a winner needs is bnb's margin.
+# The fused view's close places that no hypothesis follows are taken up then (`adopt`).
 FOLLOW_METHOD = 'bnb'
 SETTLE_PERIOD_S = 1.0     # scan time between two searches of the fused view (a search each: not every scan)
 
@@ -212,11 +231,36 @@ class HypothesisFollower:
         motion, self.odometry, self.last = self.odometry.inverse() * obs.odometry, obs.odometry, obs
         self.seen.append((obs.odometry * self.base_T_laser, obs.points))
         leader = self.resolver.update(motion, pose_fitter(self.matcher, obs.points, self.base_T_laser))
-        if leader is not None and obs.stamp - self.checked >= SETTLE_PERIOD_S:
+        if self.resolver.moved_enough() and obs.stamp - self.checked >= SETTLE_PERIOD_S:
             self.checked = obs.stamp
-            self.winner = settle(self.localizer, self.seen, self.base_T_laser, leader.pose,
-                                 [t.pose for t in self.resolver.tracks if t is not leader])
+            fused = search_fused_view(self.localizer, self.seen, self.base_T_laser)
+            if leader is not None:
+                built = len(self.seen) >= self.resolver.config.lead_scans
+                self.winner = confirm(fused, self.matcher.options, leader.pose,
+                                      [t.pose for t in self.resolver.tracks if t is not leader] if built else ())
+            if self.winner is None and fused is not None:
+                self.adopt(close_places(fused, self.matcher.options))
         return self.winner is not None
+
+    def adopt(self, places: list[Rigid2D]) -> None:
+        """Follow, from now on, each of `places` (robot poses at the last scan) that no
+        hypothesis holds, as if it had been followed from the start: it is moved back by the
+        odometry to the first scan seen and forward again scan by scan, scored and refined as
+        a hypothesis is, so its sum compares with the others'. A single scan keeps a few
+        hypotheses; the true place may not be among them (a row of look-alike places), and
+        the fused view of the way, which does not depend on them, finds it."""
+        tracks = self.resolver.tracks
+        laser_T_base = self.base_T_laser.inverse()
+        bases = [laser * laser_T_base for laser, _ in self.seen]     # robot base, odometry frame, per scan
+        for place in places:
+            if any(pose_correct(place, t.pose) for t in tracks):
+                continue
+            track = Track(place * self.odometry.inverse() * bases[0])
+            for k, (_, points) in enumerate(self.seen):
+                moved = track.pose * (bases[k - 1].inverse() * bases[k]) if k else track.pose
+                score, track.pose = pose_fitter(self.matcher, points, self.base_T_laser)(moved)
+                track.fits.append(score)
+            tracks.append(track)
 
     def follow(self, observations: Iterable[Observation],
                on_step: Optional[Callable[['HypothesisFollower'], None]] = None) -> bool:
@@ -236,7 +280,7 @@ class HypothesisFollower:
         r = self.resolver
         winner, how = self.winner, 'one place led and the scans seen, fused into one view, confirm it'
         if winner is None and search_fused:
-            winner = settle(self.localizer, self.seen, self.base_T_laser)
+            winner = confirm(search_fused_view(self.localizer, self.seen, self.base_T_laser), self.matcher.options)
             how = 'the scans seen, fused into one view, match one place'
         # A followed hypothesis's score is its mean fit over the scans seen (pose_fitter's
         # 0..1 measure), not the matcher's score of the one scan: the message says so.
