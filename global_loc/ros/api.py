@@ -240,19 +240,17 @@ class GlobalLocalizer(Node):
         return future.done() and future.result() is not None
 
     def _wait_for_result(self, handle, done, served, stop: Callable[[], bool] = lambda: False):
-        """Until the result comes or `stop()`; the result future. The result's
-        answer can be lost as the goal's can: a goal the status topic says has ended
-        without its result for GOAL_ANSWER_S is asked for its result again."""
-        ended_at = None
-        while not done.done() and not stop():
-            self._wait(done, served, GOAL_ANSWER_S / 4, stop=stop)
-            if done.done() or handle.status not in STATUS_NAMES:
-                continue
-            ended_at = ended_at or time.monotonic()
-            if time.monotonic() - ended_at > GOAL_ANSWER_S:
-                self.get_logger().warn('the goal ended but its result did not come: asking again')
-                done, ended_at = handle.get_result_async(), None
-        return done
+        """Until the result comes or `stop()`; the result future. The result's answer can be
+        lost as the goal's can: a goal the status topic says has ended without its result
+        for GOAL_ANSWER_S is asked for its result again. (One wait per request: the
+        server's absence is timed across it - ServerGone.)"""
+        while True:
+            lost = _EndedWithoutResult(handle)
+            self._wait(done, served, stop=lambda lost=lost: stop() or lost())
+            if done.done() or stop():
+                return done
+            self.get_logger().warn('the goal ended but its result did not come: asking again')
+            done = handle.get_result_async()
 
     def _request_cancel(self, handle, served) -> bool:
         """Ask the server to cancel the goal; whether it accepted within CANCEL_WAIT_S."""
@@ -307,3 +305,17 @@ def _cancel_if_accepted(future) -> None:
     handle = future.result()
     if handle is not None and handle.accepted:
         handle.cancel_goal_async()
+
+
+class _EndedWithoutResult:
+    """Whether the status topic has said for GOAL_ANSWER_S that the goal ended (its result
+    request then went unanswered)."""
+
+    def __init__(self, handle):
+        self.handle, self.ended_at = handle, None
+
+    def __call__(self) -> bool:
+        if self.handle.status not in STATUS_NAMES:
+            return False
+        self.ended_at = self.ended_at or time.monotonic()
+        return time.monotonic() - self.ended_at > GOAL_ANSWER_S
