@@ -239,19 +239,18 @@ def test_a_server_gone_mid_goal_is_a_clear_error(tmp_path):
         server.stop()
 
 
-class LossyServer:
+class LossyServer(TopicRecorder):
     """A stand-in global_loc server in this process that loses answers as Fast DDS does to a
     client it has not matched yet (ros2/rmw_fastrtps#751): the first goal request gets no
     answer and never runs (rclpy's ActionServer after a failed send_goal_response), and the
     first result request gets no answer. It answers ~/get_state 'active'. Fault injection
-    on the server side; the client under test is the real API."""
+    on the server side; the client under test is the real API. (A TopicRecorder: its own
+    rclpy context, node and spinning thread.)"""
 
     def __init__(self, env):
-        import rclpy
         from lifecycle_msgs.msg import State
         from lifecycle_msgs.srv import GetState
         from rclpy.action import ActionServer
-        from rclpy.executors import SingleThreadedExecutor
 
         from global_loc_interfaces.action import Localize
         self.goal_requests, self.result_requests, self.executed = 0, 0, 0
@@ -276,28 +275,13 @@ class LossyServer:
         def get_state(request, response):
             response.current_state = State(id=State.PRIMARY_STATE_ACTIVE, label='active')
             return response
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=int(env['ROS_DOMAIN_ID']))
-        self.node = rclpy.create_node('global_loc_server', context=self.context)
+        super().__init__(env, {}, 'global_loc_server')
         self.server = Lossy(self.node, Localize, 'localize', execute)
         self.node.create_service(GetState, '~/get_state', get_state)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.stopping = threading.Event()
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self):
-        while not self.stopping.is_set():
-            self.executor.spin_once(timeout_sec=0.05)
 
     def close(self):
-        self.stopping.set()
-        self.thread.join(5.0)
         self.server.destroy()
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.context.try_shutdown()
+        super().close()
 
 
 def test_a_goal_request_or_result_lost_in_discovery_is_asked_again():
