@@ -36,14 +36,22 @@ class NewestMessage(Generic[T]):
                    poll_s: float = 0.05) -> Optional[T]:
         """The first message that arrived at or after `since` (a clock reading); None when
         none has by since + timeout; raises CanceledError as soon as `cancelled()` says so."""
-        deadline = since + timeout
         with self._cond:
-            while True:
-                if self._latest is not None and self._latest[0] >= since:
-                    return self._latest[1]
-                if cancelled():
-                    raise CanceledError()
-                remaining = deadline - self._clock()
-                if remaining <= 0:
-                    return None
-                self._cond.wait(min(remaining, poll_s))
+            came = wait_on(self._cond, lambda: self._latest is not None and self._latest[0] >= since,
+                           since + timeout, cancelled, self._clock, poll_s)
+            return self._latest[1] if came else None
+
+
+def wait_on(cond: threading.Condition, ready: Callable[[], bool], deadline: float, cancelled: Callable[[], bool],
+            clock: Callable[[], float] = time.monotonic, poll_s: float = 0.05) -> bool:
+    """With `cond` held: wait on it until `ready()` (True) or `clock()` passes `deadline`
+    (False); raises CanceledError as soon as `cancelled()` says so (within poll_s). The
+    one waiting rule of the streams a request waits on (NewestMessage, PoseHistory)."""
+    while not ready():
+        if cancelled():
+            raise CanceledError()
+        remaining = deadline - clock()
+        if remaining <= 0:
+            return False
+        cond.wait(min(remaining, poll_s))
+    return True

@@ -11,7 +11,7 @@ import threading
 import time
 from typing import Callable, Optional
 
-from .outcome import CanceledError
+from .newest_message import wait_on
 from .transform import Rigid2D, normalize_angle
 
 
@@ -38,16 +38,9 @@ class PoseHistory:
         """Whether the history reaches `stamp` (its newest pose is at or after it; the default:
         holds any pose), waiting up to `timeout_s` for it; raises CanceledError as soon as
         `cancelled()` says so."""
-        deadline = time.monotonic() + timeout_s
         with self._lock:
-            while not (self._stamps and self._stamps[-1] >= stamp):
-                if cancelled():
-                    raise CanceledError()
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    return False
-                self._lock.wait(min(remaining, poll_s))
-            return True
+            return wait_on(self._lock, lambda: bool(self._stamps) and self._stamps[-1] >= stamp,
+                           time.monotonic() + timeout_s, cancelled, poll_s=poll_s)
 
     def newest_stamp(self) -> Optional[float]:
         """The stamp of the newest pose, None when empty."""
