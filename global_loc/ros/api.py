@@ -116,13 +116,9 @@ class GlobalLocalizer(Node):
             return False
         while time.monotonic() < deadline:
             if self._get_state.wait_for_service(timeout_sec=max(0.0, min(1.0, deadline - time.monotonic()))):
-                future = self._get_state.call_async(GetState.Request())
                 with contextlib.suppress(ServerGone):    # a call lost in discovery is retried
-                    self._wait(future, self._get_state.service_is_ready,
-                               max(0.0, min(STATE_CALL_S, deadline - time.monotonic())))
-                if future.done() and future.result() is not None and \
-                        future.result().current_state.label == 'active':
-                    return True
+                    if self._lifecycle_state(self._get_state.service_is_ready, deadline) == 'active':
+                        return True
                 self._spin_for(0.1)
         return False
 
@@ -222,7 +218,7 @@ class GlobalLocalizer(Node):
                 raise GoalUnanswered(f'the global_loc server did not answer the goal request within '
                                      f'{self.server_timeout_s:g} s (it stopped, or it is still starting)')
             self._wait(sent[0], served, wait, stop=lambda: any(f.done() for f in sent))
-            if not any(f.done() for f in sent) and self._answers_get_state(served, deadline):
+            if not any(f.done() for f in sent) and self._lifecycle_state(served, deadline) is not None:
                 self.get_logger().warn(f'no answer to the goal request within {GOAL_ANSWER_S:g} s while the server '
                                        f'answers ~/get_state: sending it again (lost in discovery)')
                 sent.append(self._action.send_goal_async(goal, feedback_callback=callback))
@@ -232,12 +228,15 @@ class GlobalLocalizer(Node):
                 other.add_done_callback(_cancel_if_accepted)
         return first.result()
 
-    def _answers_get_state(self, served, deadline: float) -> bool:
+    def _lifecycle_state(self, served, deadline: float) -> Optional[str]:
+        """The server's lifecycle state from one ~/get_state call answered within
+        STATE_CALL_S (and before `deadline`); None when the service is not there or the
+        answer did not come."""
         if not self._get_state.service_is_ready():
-            return False
+            return None
         future = self._get_state.call_async(GetState.Request())
         self._wait(future, served, max(0.0, min(STATE_CALL_S, deadline - time.monotonic())))
-        return future.done() and future.result() is not None
+        return future.result().current_state.label if future.done() and future.result() is not None else None
 
     def _wait_for_result(self, handle, done, served, stop: Callable[[], bool] = lambda: False):
         """Until the result comes or `stop()`; the result future. The result's answer can be
