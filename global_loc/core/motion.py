@@ -6,9 +6,10 @@ confident single-scan answer needs is the leader. Sums, not means: the views tha
 twins apart may be a few of many (a box seen only while facing one way), and a mean
 dilutes them; twins' sums differ only by noise, which grows with the square root of the
 number of scans, far slower than a real lead. The leader wins once the scans seen on the
-way, fused into one odometry-aligned view and searched over the whole map, confidently
-agree (`settle`); without a leader the fused view alone may settle it. A view that never
-tells the places apart (a perfectly symmetric room) never lets one win.
+way, fused into one odometry-aligned view and searched over the whole map, agree
+(`confirm`); without a leader the fused view alone may settle it, and its close places
+no hypothesis follows are taken up (`HypothesisFollower.adopt`). A view that never tells
+the places apart (a perfectly symmetric room) never lets one win.
 
 `HypothesisFollower` is that loop over a stream of observations (points, odometry at
 the scan's stamp, stamp): the server feeds it scans as they arrive, `localize --follow`
@@ -178,9 +179,8 @@ def confirm(fused, options, candidate: Optional[Rigid2D] = None, beaten: Sequenc
 
 # Following uses bnb whatever method answered the single scan: the per-scan fit (fit_at,
 # a refinement within a cell on bnb's precomputed field) has no counterpart in the thesis
-# matchers, and `settle` searches the whole map about once a second while the robot moves,
-# which only bnb does in tens of milliseconds; the lead a winner needs is bnb's margin.
-# The fused view's close places that no hypothesis follows are taken up then (`adopt`).
+# matchers, and `search_fused_view` searches the whole map about once a second while the
+# robot moves, which only bnb does in tens of milliseconds; the lead a winner needs is bnb's margin.
 FOLLOW_METHOD = 'bnb'
 SETTLE_PERIOD_S = 1.0     # scan time between two searches of the fused view (a search each: not every scan)
 
@@ -252,13 +252,14 @@ class HypothesisFollower:
         tracks = self.resolver.tracks
         laser_T_base = self.base_T_laser.inverse()
         bases = [laser * laser_T_base for laser, _ in self.seen]     # robot base, odometry frame, per scan
+        fits = [pose_fitter(self.matcher, points, self.base_T_laser) for _, points in self.seen]
         for place in places:
             if any(pose_correct(place, t.pose) for t in tracks):
                 continue
             track = Track(place * self.odometry.inverse() * bases[0])
-            for k, (_, points) in enumerate(self.seen):
+            for k, fit in enumerate(fits):
                 moved = track.pose * (bases[k - 1].inverse() * bases[k]) if k else track.pose
-                score, track.pose = pose_fitter(self.matcher, points, self.base_T_laser)(moved)
+                score, track.pose = fit(moved)
                 track.fits.append(score)
             tracks.append(track)
 
