@@ -75,6 +75,41 @@ def test_lifecycle_manager_drives_a_server_started_without_autostart(ros, tmp_pa
     assert 'cleaned up: map dropped' in servers[0].output()
 
 
+def bring_up_as_nav2_does(recorder) -> list[bool]:
+    """nav2's lifecycle_manager at start-up, for one node: configure then activate, each
+    by transition *id* (ChangeState with an empty label), then get_state; the answers."""
+    answers = []
+    for transition_id in (Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_ACTIVATE):
+        answers.append(transition(recorder, transition_id))
+        state(recorder)
+    return answers
+
+
+@pytest.mark.parametrize('autostart', [True, False])
+def test_a_lifecycle_manager_asking_by_id_is_answered_and_the_server_keeps_serving(ros, tmp_path, autostart):
+    """By id, a transition the state does not have (configure while active: a server up
+    with autostart under nav2's lifecycle_manager) is answered success=false, as rclcpp
+    nodes answer; rclpy alone raised into the executor and the process died."""
+    env, recorder, servers, api = ros
+    server = start_server(env, tmp_path / 'server.log', f'autostart:={str(autostart).lower()}',
+                          ready_line='ready: action' if autostart else 'unconfigured')
+    servers.append(server)
+    assert bring_up_as_nav2_does(recorder) == ([False, False] if autostart else [True, True]), server.output()
+    assert state(recorder) == 'active'
+    bogus = [ChangeState.Request(transition=Transition(id=99)),
+             ChangeState.Request(transition=Transition(id=Transition.TRANSITION_CLEANUP)),   # not from active
+             ChangeState.Request(transition=Transition(label='no_such_transition'))]
+    for request in bogus:
+        assert not call(recorder, ChangeState, '/global_loc_server/change_state', request).success
+    assert server.proc.poll() is None, server.output()
+    assert state(recorder) == 'active'
+    assert 'change_state refused: transition id 99 is not available in state active' in server.output()
+    assert api.localize(timeout_s=10).success, server.output()
+    assert transition(recorder, Transition.TRANSITION_DEACTIVATE) and state(recorder) == 'inactive'
+    assert not transition(recorder, Transition.TRANSITION_DEACTIVATE)     # again: not from inactive
+    assert transition(recorder, Transition.TRANSITION_ACTIVATE) and api.localize(timeout_s=10).success
+
+
 def test_deactivate_during_a_goal_ends_it_and_refuses_the_next(ros, tmp_path):
     env, recorder, servers, api = ros
     server = start_server(env, tmp_path / 'server.log')

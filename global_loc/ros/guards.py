@@ -1,12 +1,15 @@
 """What keeps the server's executor spinning whatever a callback meets: guarded callbacks
 (an exception logged, throttled, and counted on /diagnostics), the count of requests in
-flight (the shutdown waits for them), and the one-off warning about a peer server."""
+flight (the shutdown waits for them), a lifecycle `~/change_state` that answers every
+request, and the one-off warning about a peer server."""
 from __future__ import annotations
 
 import contextlib
 import functools
 import threading
 import traceback
+
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
 
 def guard(callback, errors: dict, logger):
@@ -51,3 +54,32 @@ def warn_about_peers(node) -> None:
     if len(peers) > 1:
         node.get_logger().error(f'{len(peers)} nodes named {node.get_name()} on this ROS domain: each executes '
                                 f'every goal and publishes its poses; run one per domain or rename one')
+
+
+def answer_every_change_state(node) -> None:
+    """Make `node`'s (an rclpy LifecycleNode's) `~/change_state` answer `success=false` to
+    a transition the current state does not have, as rclcpp nodes do. rclpy (Jazzy) checks
+    a request by label but not by id: configure by id while active - what nav2's
+    lifecycle_manager sends at start-up to a server already up with autostart - raises
+    RCLError "Transition is not registered" into the executor and ends the process
+    (ros2/rclpy#1209). A valid request runs rclpy's own handler unchanged."""
+    service = node._service_change_state       # rclpy's: no public hook to wrap its callback
+    handle = service.callback
+    machine = node._state_machine
+
+    def change_state(request, response):
+        transition = request.transition
+        available = {tid: label for tid, label, *_ in machine.available_transitions}
+        state = machine.current_state[1]
+        if not transition.label and transition.id not in available:
+            node.get_logger().warn(f'change_state refused: transition id {transition.id} is not available in state '
+                                   f'{state} (available: {", ".join(f"{i} {n}" for i, n in available.items())})')
+            response.success = False
+            return response
+        try:
+            return handle(request, response)
+        except _rclpy.RCLError as e:     # a transition the state machine refused after all
+            node.get_logger().warn(f'change_state refused in state {state}: {e}')
+            response.success = False
+            return response
+    service.callback = change_state

@@ -40,7 +40,7 @@ from ..core.newest_message import NewestMessage
 from ..core.outcome import Outcome
 from ..core.pose_history import PoseHistory
 from .convert import map_from_msg, pose_from_msg, stamp_seconds
-from .guards import InFlight, guard, warn_about_peers
+from .guards import InFlight, answer_every_change_state, guard, warn_about_peers
 from .motion import resolve_by_motion
 from .node_main import exit_process, run_node
 from .parameters import BY_NAME, ConfigError, apply_live, check_set, declare_parameters, parameter_value, read_config
@@ -59,6 +59,7 @@ WATCH_METHOD = 'bnb'     # the fit the watch and the motion follower measure is 
 class GlobalLocServer(LifecycleNode):
     def __init__(self):
         super().__init__('global_loc_server')
+        answer_every_change_state(self)                 # nav2's lifecycle_manager asks by id
         self.start_problems = declare_parameters(self)
         self.config = None                              # ServerConfig while configured
         self.group = ReentrantCallbackGroup()
