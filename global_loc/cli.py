@@ -14,6 +14,8 @@ import sys
 
 import numpy as np
 
+from .core import limits
+from .core.limits import check_within
 from .core.localizer import Localizer, LocalizerConfig
 from .core.map_io import MapError, load_map_yaml
 from .core.matchers import BranchAndBoundOptions, MethodError, method_names
@@ -75,7 +77,11 @@ def laser_mounting(args) -> tuple[LaserMount, dict]:
     """The laser's pose on the robot base, so the printed poses are the base's, as the server
     publishes them: with --bag from the recording's /tf_static (and the /tf transforms that
     never change) when they have it, else the --laser-x/--laser-y/--laser-yaw flags; and what
-    a line says of where it came from."""
+    a line says of where it came from. The flags have the server's laser_* ranges (ValueError)."""
+    for axis, bounds in (('x', limits.LASER_OFFSET_M), ('y', limits.LASER_OFFSET_M), ('yaw', limits.LASER_ANGLE_RAD)):
+        value = getattr(args, f'laser_{axis}')
+        if value is not None:
+            check_within(f'--laser-{axis}', value, bounds)
     flags = LaserMount(Rigid2D(args.laser_x or 0.0, args.laser_y or 0.0, args.laser_yaw or 0.0))
     said = {'from': '--laser-x/--laser-y/--laser-yaw', **flags.base_T_laser.as_dict()}
     if not args.bag:

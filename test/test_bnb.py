@@ -128,7 +128,7 @@ def test_planes_built_a_few_rows_at_a_time_are_those_built_at_once(monkeypatch):
 
 @pytest.mark.parametrize('levels', [0, 8])
 def test_levels_beyond_what_the_planes_cover_are_a_clear_error(levels):
-    with pytest.raises(ValueError, match='bnb levels must be 1 .. 7'):
+    with pytest.raises(ValueError, match=r'bnb.levels must be in \[1, 7\]'):
         BranchAndBoundMatcher(small_room(), BranchAndBoundOptions(levels=levels))
 
 

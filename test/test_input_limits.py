@@ -1,6 +1,7 @@
 """Issue 24 items 5-9 in the core: per-goal quantities within their parameters' bounds and
 a stated budget, scans whose fields contradict each other, upside-down lasers, priors
 tighter than the search's resolution, absurd map resolutions, map paths that are not files."""
+import json
 import math
 import os
 import re
@@ -255,3 +256,59 @@ def test_a_prior_tighter_than_the_search_centred_on_the_truth_localizes_and_says
         assert re.search(f"{said} .*, the search's resolution$", result.message), result.message
         assert result.region.contains(result.pose) and not result.region == SearchRegion(truth, radius_m,
                                                                                          math.radians(yaw_tolerance_deg))
+
+
+# ---- a non-finite pose is impossible at the last step; one range per parameter ------------------
+@pytest.mark.parametrize('flag', [('--laser-x', 'nan'), ('--laser-y', 'inf'), ('--laser-yaw', 'nan'),
+                                  ('--laser-x', '1e9'), ('--bnb-sigma-cells', '0'), ('--bnb-max-points', '0'),
+                                  ('--bnb-max-range', '0'), ('--bnb-keep-ratio', 'nan')])
+def test_the_cli_refuses_a_laser_or_bnb_flag_outside_the_servers_range(tmp_path, capsys, flag):
+    from global_loc.cli import main
+    scans = tmp_path / 'scans.jsonl'
+    scans.write_text(json.dumps({**simulate_scan(small_room(), Rigid2D(2.0, 2.0, 0.3), 270, 541, 10.0).to_dict()})
+                     + '\n')
+    assert main(['localize', '--map', write_room(tmp_path), '--scans', str(scans), *flag]) == 2
+    out, err = capsys.readouterr()
+    assert out == '' and re.search(r'error: .*must be in \[', err), err
+
+
+def write_room(tmp_path) -> str:
+    path = str(tmp_path / 'room.yaml')
+    save_map_yaml(small_room(), path)
+    return path
+
+
+def test_a_result_refuses_a_non_finite_pose_whichever_way_it_is_given():
+    from global_loc.core.localizer import Hypothesis, LocalizationResult, NonFinitePose
+    from global_loc.core.outcome import Outcome
+    nan = Rigid2D(float('nan'), 0.0, 0.0)
+    with pytest.raises(NonFinitePose):
+        LocalizationResult(Outcome.LOCALIZED, 'localized', 'bnb', pose=nan)
+    result = LocalizationResult(Outcome.LOCALIZED, 'localized', 'bnb', pose=Rigid2D(1.0, 2.0, 0.5))
+    with pytest.raises(NonFinitePose):
+        result.pose = Rigid2D(0.0, float('inf'), 0.0)
+    with pytest.raises(NonFinitePose):
+        Hypothesis(Rigid2D(0.0, 0.0, float('nan')), 1.0)
+    assert result.pose == Rigid2D(1.0, 2.0, 0.5)
+
+
+@pytest.mark.parametrize('method', ['bnb', 'template_ccoeff'])
+def test_a_non_finite_laser_mounting_is_an_unusable_scan_not_a_nan_pose(method):
+    room = small_room()
+    scan = simulate_scan(room, Rigid2D(2.0, 2.0, 0.3), 270, 541, 10.0)
+    for mount in (Rigid2D(float('nan'), 0.0, 0.0), Rigid2D(0.0, 0.0, float('inf'))):
+        with pytest.raises(MountError, match='must be finite'):
+            Localizer(room).localize(scan, method=method, base_T_laser=mount)
+
+
+@pytest.mark.ros      # imports the server's parameter table (rclpy)
+def test_the_servers_bnb_ranges_are_the_options_own_and_a_tilted_laser_roll_is_refused():
+    from global_loc.core.matchers.bnb.options import option_fields, option_range
+    from global_loc.ros.parameters import BY_NAME, ConfigError, build_config
+    assert all(BY_NAME[f'bnb.{name}'].range == option_range(name) for name, *_ in option_fields())
+    defaults = {name: spec.default for name, spec in BY_NAME.items()}
+    for roll in (0.0, math.pi, -math.pi, math.radians(4.0)):
+        build_config({**defaults, 'laser_roll': roll})
+    for roll in (0.5, math.pi / 2, math.pi - 0.3):
+        with pytest.raises(ConfigError, match='laser_roll: the laser is tilted'):
+            build_config({**defaults, 'laser_roll': roll})

@@ -40,6 +40,11 @@ MAX_MAP_CELLS = 100_000_000
 # computed up front from the request and refused before anything is allocated.
 MATCH_BUDGET_BYTES = 1 << 30
 
+# The primary laser's mounting on the base when no tf gives it (server laser_* parameters,
+# the CLI's --laser-* flags): a position within 100 m, angles within one turn either way.
+LASER_OFFSET_M = (-100.0, 100.0)
+LASER_ANGLE_RAD = (-2 * math.pi, 2 * math.pi)
+
 # A laser tilted by more than this (roll or pitch away from 0 and from 180 degrees) does
 # not scan a horizontal plane: its ranges are not the map's distances.
 MAX_LASER_TILT_DEG = 5.0

@@ -17,6 +17,7 @@ from .limits import check_angle_step  # the server's and the request's check too
 from .map_io import OccupancyMap
 from .matchers import BranchAndBoundOptions, MatchOptions, make_matcher, resolve_method
 from .matchers.base import ProgressFn
+from .mount import MountError
 from .outcome import Outcome
 from .scan import Scan, ScanPoints, require_shape, scan_to_points
 from .search_region import SearchRegion
@@ -39,10 +40,24 @@ class LocalizerConfig:
     max_search_s: float = math.inf
 
 
+class NonFinitePose(ValueError):
+    """A result would carry a pose with a NaN or infinite coordinate: refused at the last step,
+    whatever path made it (a bad mounting, a degenerate match)."""
+
+
+def require_finite(pose: Optional[Rigid2D], what: str) -> Optional[Rigid2D]:
+    if pose is not None and not pose.is_finite():
+        raise NonFinitePose(f'{what} is not finite: {pose}')
+    return pose
+
+
 @dataclass
 class Hypothesis:
     pose: Rigid2D          # robot base in the map frame
     score: float
+
+    def __post_init__(self):
+        require_finite(self.pose, 'a hypothesis pose')
 
 
 @dataclass
@@ -59,6 +74,15 @@ class LocalizationResult:
     dropped: dict = field(default_factory=dict)
     search_stats: Any = None   # what the matcher's search did (bnb: SearchStats), for diagnostics
     region: Optional[SearchRegion] = None   # the search prior as searched (widened to the search's resolution)
+
+    def __setattr__(self, name, value):
+        # the one door every pose goes through, set at construction or after: never NaN or inf
+        if name == 'pose':
+            require_finite(value, 'the result pose')
+        elif name == 'hypotheses':
+            for h in value:
+                require_finite(h.pose, 'a hypothesis pose')
+        super().__setattr__(name, value)
 
     @property
     def success(self) -> bool:
@@ -109,6 +133,8 @@ class Localizer:
         t0 = time.perf_counter() if t0 is None else t0
         matcher = self.matcher(method or cfg.method)
         base_T_laser = base_T_laser or cfg.base_T_laser
+        if not base_T_laser.is_finite():
+            raise MountError(f'the laser mounting on the base must be finite, got {base_T_laser}')
         laser_T_base = base_T_laser.inverse()
         bounded = region is not None and region.bounded
         step = check_angle_step(angle_step_deg or cfg.angle_step_deg)

@@ -26,6 +26,9 @@ class Rigid2D:
     y: float = 0.0
     yaw: float = 0.0
 
+    def is_finite(self) -> bool:
+        return all(map(math.isfinite, (self.x, self.y, self.yaw)))
+
     @staticmethod
     def from_matrix(m) -> 'Rigid2D':
         """From a 3x3 homogeneous matrix whose linear part is a rotation (or a rotation

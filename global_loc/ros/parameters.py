@@ -9,7 +9,6 @@ traceback, never a configured node whose every goal fails.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
@@ -19,7 +18,9 @@ from rclpy.parameter import Parameter
 from ..core import limits
 from ..core.localizer import LocalizerConfig
 from ..core.matchers import BranchAndBoundOptions, method_names, resolve_method
-from ..core.matchers.bnb.options import option_fields
+from ..core.matchers.bnb.options import option_fields, option_range
+from ..core.mount import LaserMount, MountError
+from ..core.mount3d import Mount3D
 from ..core.paths import default_map_yaml
 from ..core.request import BOUNDS, RequestDefaults
 from ..core.supervisor import SupervisorConfig
@@ -39,14 +40,6 @@ class Spec:
     range: tuple | None = NO_RANGE    # inclusive (lo, hi) for numbers
     live: bool = False                # applied to the next request when set
 
-
-# bnb.* ranges: what its precomputation and search can do (levels: 2^6-cell blocks at most).
-BNB_RANGES = {'sigma_cells': (0.1, 20.0), 'levels': (1, 7), 'max_points': (3, 100000), 'max_range': (0.1, 1e4),
-              'keep_ratio': (0.01, 0.999), 'max_nodes': (1, 10 ** 9), 'hypotheses': (1, 100),
-              'distinct_cells': (0.0, 1e4), 'distinct_m': (0.0, 1e3), 'distinct_angle': (0.0, math.pi),
-              'see_through_tolerance_cells': (0.0, 100.0), 'min_confidence': (0.001, 1.0),
-              'band_allowance': (0.0, 1.0), 'settle_slack': (0.0, 1.0),
-              'plane_memory_mb': (1.0, 1e6)}
 
 SPECS = [
     Spec('autostart', True, 'configure and activate on start (false: a lifecycle manager does)'),
@@ -106,16 +99,16 @@ SPECS = [
          (1e-6, 100.0), live=True),
     Spec('covariance_yaw', _L.covariance_yaw, 'yaw variance published with the thesis matchers, rad^2',
          (1e-6, 10.0), live=True),
-    Spec('laser_x', 0.0, 'laser position on the base, m (used without tf2)', (-100.0, 100.0), live=True),
-    Spec('laser_y', 0.0, 'laser position on the base, m (used without tf2)', (-100.0, 100.0), live=True),
-    Spec('laser_yaw', 0.0, 'laser heading on the base, rad (used without tf2)', (-2 * math.pi, 2 * math.pi),
-         live=True),
-    Spec('laser_roll', 0.0, 'laser roll on the base, rad (used without tf2): pi for a laser mounted upside down; '
-                            'a tilted laser is refused', (-2 * math.pi, 2 * math.pi), live=True),
+    Spec('laser_x', 0.0, 'laser position on the base, m (used without tf2)', limits.LASER_OFFSET_M, live=True),
+    Spec('laser_y', 0.0, 'laser position on the base, m (used without tf2)', limits.LASER_OFFSET_M, live=True),
+    Spec('laser_yaw', 0.0, 'laser heading on the base, rad (used without tf2)', limits.LASER_ANGLE_RAD, live=True),
+    Spec('laser_roll', 0.0, f'laser roll on the base, rad (used without tf2): pi for a laser mounted upside down; '
+                            f'a tilted laser (more than {limits.MAX_LASER_TILT_DEG:g} deg from 0 or pi) is refused',
+         limits.LASER_ANGLE_RAD, live=True),
     Spec('max_search_s', 5.0, 'seconds a search may take; then the goal ends "search incomplete" with what was '
                               'explored (a goal always ends)', limits.MAX_SEARCH_S, live=True),
 ] + [Spec(f'bnb.{name}', default, f'bnb matcher: {help_text} (applied on configure: a new precomputation)',
-          BNB_RANGES.get(name)) for name, _, default, help_text in option_fields()]
+          option_range(name)) for name, _, default, help_text in option_fields()]
 BY_NAME = {s.name: s for s in SPECS}
 
 
@@ -150,6 +143,10 @@ def build_config(values: dict, mounts: dict | None = None) -> ServerConfig:
         if lo_hi is not None and not (lo_hi[0] <= value <= lo_hi[1]):
             raise ConfigError(f'parameter {name}: {value} is outside [{lo_hi[0]}, {lo_hi[1]}]')
     v = values
+    try:
+        LaserMount.from_mount3d(Mount3D(v['laser_x'], v['laser_y'], 0.0, v['laser_roll'], 0.0, v['laser_yaw']))
+    except MountError as e:
+        raise ConfigError(f'parameter laser_roll: {e}') from None
     try:
         resolve_method(v['method'])
         bnb = BranchAndBoundOptions(**{name: v[f'bnb.{name}'] for name, *_ in option_fields()})
