@@ -183,6 +183,46 @@ def test_cancel_from_a_feedback_callback_ends_the_goal_canceled(office):
     assert not api.cancel()                           # nothing runs now
 
 
+def test_an_exception_in_the_feedback_callback_cancels_the_goal(office):
+    """The exception leaves localize() and the goal is canceled with it: the server is
+    free for the next goal at once and publishes nothing for the abandoned one."""
+    api, _, server = office
+    assert api.wait_until_active(60.0)
+
+    def broken(f):
+        if f.stage == Stage.MATCHING:
+            raise RuntimeError('a bug in the caller\'s feedback callback')
+
+    before = server.output().count('published on /initialpose')
+    with pytest.raises(RuntimeError, match='feedback callback'):
+        api.localize(method='template_ccoeff', angle_step_deg=0.2, timeout_s=10.0, feedback=broken)
+    deadline = time.monotonic() + 10
+    while 'canceled' not in server.output().split('a bug')[-1] and time.monotonic() < deadline:
+        time.sleep(0.1)
+    result = api.localize(timeout_s=10.0, publish=False)
+    assert result.success, (result, server.output())
+    assert server.output().count('published on /initialpose') == before, server.output()
+
+
+BAD_TYPES = [dict(method=5), dict(method=b'bnb'), dict(timeout_s='5'), dict(near=(1.0, 2.0)), dict(near='origin'),
+             dict(publish='yes'), dict(radius_m=None), dict(feedback=3)]
+
+
+def test_a_goal_field_of_the_wrong_type_is_a_type_error_not_an_abort():
+    """Checked before the message is built (the generated conversion aborts the process on
+    method=5): in a subprocess, so an abort would not take the test run with it."""
+    code = ('import rclpy\nfrom global_loc.ros.api import GlobalLocalizer\nrclpy.init()\n'
+            'loc = GlobalLocalizer(server_timeout_s=0.5)\n'
+            f'for bad in {BAD_TYPES!r}:\n'
+            '    try:\n        loc.localize(**bad)\n    except TypeError as e:\n        print("TypeError:", e)\n'
+            'loc.destroy_node()\nrclpy.shutdown()\n')
+    out = subprocess.run([sys.executable, '-c', code], env=isolated_env(), capture_output=True, text=True, timeout=60)
+    lines = out.stdout.splitlines()
+    assert out.returncode == 0 and len(lines) == len(BAD_TYPES), (out.returncode, out.stdout, out.stderr)
+    for bad, line in zip(BAD_TYPES, lines, strict=True):
+        assert line.startswith(f'TypeError: {next(iter(bad))} must be'), line
+
+
 def test_cancel_from_another_thread(office):
     api, _, _ = office
     assert api.wait_until_active(60.0)

@@ -22,11 +22,13 @@ from __future__ import annotations
 
 import contextlib
 import math
+import numbers as numbers_abc
 import signal
 import threading
 import time
 from typing import Callable, Optional
 
+import numpy as np
 from action_msgs.srv import CancelGoal
 from geometry_msgs.msg import Pose2D
 from lifecycle_msgs.srv import GetState
@@ -130,8 +132,13 @@ class GlobalLocalizer(Node):
         (x, y, yaw) in the map frame, radians) for `radius_m` / `yaw_tolerance_deg` (0: the
         whole map / any heading); `timeout_s`: how long the server waits for a scan (0: its
         default); `feedback(msg)` gets each Localize.Feedback (its `stage` is a core.outcome.Stage
-        value). Raises NoServer, GoalUnanswered, GoalRejected, ServerGone; KeyboardInterrupt
-        after canceling the goal."""
+        value). Raises TypeError for a field of the wrong type (before anything is sent),
+        NoServer, GoalUnanswered, GoalRejected, ServerGone; whatever else ends the call -
+        KeyboardInterrupt, an exception `feedback` raised - cancels the goal first."""
+        check_goal_types(method=method, near=near, feedback=feedback, numbers=dict(
+            radius_m=radius_m, yaw_tolerance_deg=yaw_tolerance_deg, resolve_by_motion_s=resolve_by_motion_s,
+            angle_step_deg=angle_step_deg, timeout_s=timeout_s), flags=dict(
+            rotate_in_place=rotate_in_place, publish=publish, publish_if_ambiguous=publish_if_ambiguous))
         centre = near if isinstance(near, Rigid2D) else Rigid2D(*(near or (0.0, 0.0, 0.0)))
         goal = Localize.Goal(method=method or '', angle_step_deg=float(angle_step_deg), timeout_s=float(timeout_s),
                              publish_initialpose=bool(publish), publish_if_ambiguous=bool(publish_if_ambiguous),
@@ -196,9 +203,10 @@ class GlobalLocalizer(Node):
                     raise KeyboardInterrupt('the goal was canceled' if accepted else
                                             'the goal was not canceled: the server did not confirm the cancel')
                 done = self._wait_for_result(handle, done, served)   # it ends canceled at the search's next step
-        except KeyboardInterrupt:
+        except BaseException:    # Ctrl-C, a feedback callback's exception, ServerGone: no goal left running
             if not cancel_sent:
-                self._request_cancel(handle, served)
+                with contextlib.suppress(Exception):
+                    self._request_cancel(handle, served)
             raise
         return done.result()
 
@@ -297,6 +305,28 @@ class GlobalLocalizer(Node):
             raise KeyboardInterrupt(f'signal {signum}')
         self._signalled = True
         self._cancel_wanted.set()
+
+
+def check_goal_types(method, near, feedback, numbers: dict, flags: dict) -> None:
+    """TypeError naming the first localize() argument of the wrong type: the generated
+    message conversion would otherwise abort the process (a C assertion) on, say, method=5."""
+    def real(value) -> bool:
+        return isinstance(value, numbers_abc.Real) and not isinstance(value, bool)
+
+    if method is not None and not isinstance(method, str):
+        raise TypeError(f'method must be a str (a matcher name) or None, got {type(method).__name__}')
+    if near is not None and not isinstance(near, Rigid2D):
+        if isinstance(near, (str, bytes)) or not hasattr(near, '__len__') or len(near) != 3 or \
+                not all(map(real, near)):
+            raise TypeError(f'near must be a Rigid2D or (x, y, yaw) numbers, got {near!r}')
+    for name, value in numbers.items():
+        if not real(value):
+            raise TypeError(f'{name} must be a number, got {type(value).__name__}')
+    for name, value in flags.items():
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f'{name} must be a bool, got {type(value).__name__}')
+    if feedback is not None and not callable(feedback):
+        raise TypeError(f'feedback must be callable or None, got {type(feedback).__name__}')
 
 
 def _cancel_if_accepted(future) -> None:
