@@ -261,6 +261,9 @@ def test_search_limit_and_missing_surf_end_goals_with_their_reason(tmp_path):
         code, result = localize(env, '--method', 'template_ccoeff', '--angle-step', '0.1', '--timeout', '10')
         assert code == 1 and result['outcome'] == 'search_incomplete', result
         assert '1 s search limit' in result['message'] and time.monotonic() - t0 < 30
+        code, result = localize(env, '--method', 'features_sift')     # not in `methods`: never built in a goal
+        assert code == 1 and result['outcome'] == 'bad_goal' and 'features_sift is not prepared on this server' in \
+            result['message'], result
         if not surf_available():
             code, result = localize(env, '--method', 'features_surf')
             assert code == 1 and result['outcome'] == 'bad_goal' and 'SURF is not in this OpenCV build' in \

@@ -124,6 +124,9 @@ def test_a_live_parameter_applies_to_the_next_goal_and_a_refused_one_says_why(tm
         assert result['outcome'] == 'no_scan' and 'within 0.5 s' in result['message'], result
         refused = op.set(method='no_such_matcher')[0]
         assert not refused.successful and 'unknown method' in refused.reason, refused
+        refused = op.set(method='features_sift')[0]      # known, but not prepared with the map
+        assert not refused.successful and 'features_sift is not prepared' in refused.reason, refused
+        assert op.set(method='template_sqdiff')[0].successful      # in the default methods
         refused = op.set(bnb__keep_ratio=5.0)[0]
         assert not refused.successful and 'keep_ratio' in refused.reason + str(refused), refused
         deferred = op.set(bnb__max_nodes=50)[0]

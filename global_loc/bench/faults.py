@@ -14,6 +14,13 @@ one after another, while the scenario injects its fault:
   simulator mid-goal, started again 1-4 s later at another pose; sim_killed: SIGKILL, at once;
 - lifecycle_mid_goal: deactivate (-> cleanup -> configure) -> activate on ~/change_state
   mid-goal, twice;
+- lifecycle_by_id: nav2's lifecycle_manager's requests by transition id mid-goal: its
+  start-up (configure, activate) sent to a server already up through autostart, an id no
+  state has and cleanup while active (each must be answered false, the server serving
+  on), then deactivate -> cleanup -> configure -> activate;
+- unprepared_method: goals naming features_sift (not prepared: refused at once, never
+  built inside a goal) among slow template goals, canceled 0.3-1.5 s after they are sent,
+  and deactivate -> activate mid-goal;
 - params_mid_goal: three /global_loc_server/set_parameters calls mid-goal, live values and
   refused ones;
 - client_killed: `test_global_loc` SIGINT-ed and SIGKILL-ed mid-goal (its process group,
@@ -24,7 +31,10 @@ core.transform.pose_correct from the simulator's /sim/true_pose at the pose's st
 scan's); localized results that are wrong; hangs (a goal unanswered GOAL_BOUND_S after it
 was sent, a service call unanswered, a process not ended EXIT_BOUND_S after its signal);
 recovery: from the end of the fault (the last thing the scenario did) to the next right
-localization (a goal localized right, a right pose published or taken by the localizer).
+localization (a goal localized right, a right pose published or taken by the localizer);
+crashes (the server exited before the run's end); goals that outlived their configuration
+(in flight when a deactivate was sent, answered after it was, not `canceled`); non-finite
+poses (published or in a result); the slowest cancel (sent to the goal's result).
 """
 from __future__ import annotations
 
@@ -56,6 +66,8 @@ AUTO_RELOCALIZE = ('auto_relocalize:=true', 'relocalize.start_delay_s:=0.5', 're
 POSES = (Rigid2D(20.675, 5.225, 0.0), Rigid2D(3.975, 14.625, 2.499), Rigid2D(2.025, 10.375, -0.044),
          Rigid2D(22.075, 4.925, 0.349))
 BNB, TEMPLATE = {'method': 'bnb'}, {'method': 'template_ccoeff', 'angle_step_deg': 2.0}
+SIFT = {'method': 'features_sift'}          # not in the server's default `methods`
+SLOW_TEMPLATE = {'method': 'template_ccoeff', 'angle_step_deg': 0.5, 'cancel_after_s': (0.3, 1.5)}
 
 
 class Run:
@@ -70,6 +82,7 @@ class Run:
         self.processes: dict[str, object] = {}
         self.h = Harness(self.env, 'global_loc_faults')
         self.goals, self.hangs, self.notes = [], [], []
+        self.deactivations = []        # (sent, answered) monotonic times of each deactivate
         self.t_start, self.fault_end = time.monotonic(), None
         self.localizer = None
         self._loop_stop, self._loop = threading.Event(), None
@@ -111,20 +124,30 @@ class Run:
 
     # ---- goals ----------------------------------------------------------------------------
     def goal(self, fields: dict) -> None:
+        """One goal to its end; `cancel_after_s` (low, high): canceled that long after it was sent."""
         t0 = time.monotonic()
+        fields = dict(fields)
+        cancel_after = fields.pop('cancel_after_s', None)
         record = {'t0': t0, 'method': fields['method']}
         self.goals.append(record)
         handle = self.h.send(timeout_s=2.0, publish_initialpose=True, **fields)
         if handle is None or not handle.accepted:
             self.hangs.append(f'goal at {t0 - self.t_start:.1f} s: not accepted within 20 s')
             return
-        res = self.h.wait(handle.get_result_async(), GOAL_BOUND_S)
+        done = handle.get_result_async()
+        if cancel_after is not None and self.h.wait(done, float(self.rng.uniform(*cancel_after))) is None:
+            record['canceled_at'] = time.monotonic()
+            handle.cancel_goal_async()
+        res = self.h.wait(done, GOAL_BOUND_S)
         record['t1'] = time.monotonic()
+        if 'canceled_at' in record:
+            record['cancel_s'] = record['t1'] - record['canceled_at']
         if res is None:
             self.hangs.append(f'goal at {t0 - self.t_start:.1f} s ({fields}): no result within {GOAL_BOUND_S} s')
             return
         r = res.result
         record.update(outcome=Outcome(r.outcome).label, success=bool(r.success))
+        record['nonfinite'] = len(r.hypotheses.poses) > 0 and not self.h.pose_from_msg(r.pose.pose.pose).is_finite()
         if r.success and len(r.hypotheses.poses):
             pose = self.h.pose_from_msg(r.pose.pose.pose)
             record['ok'] = self.h.right_at(pose, r.scan_stamp)
@@ -143,6 +166,17 @@ class Run:
         self._loop = threading.Thread(target=run, daemon=True)
         self._loop.start()
 
+    def transition(self, step: int, expected: bool = True) -> None:
+        """A lifecycle transition by id; an answer other than `expected` is noted, none is a hang."""
+        sent = time.monotonic()
+        ok = self.h.change_state(step)
+        if step == 4:          # lifecycle_msgs Transition.TRANSITION_DEACTIVATE
+            self.deactivations.append((sent, time.monotonic()))
+        if ok is None:
+            self.hangs.append(f'change_state {step}: no answer within 15 s')
+        elif ok != expected:
+            self.notes.append(f'change_state {step}: {ok}, expected {expected}')
+
     def sleep_between(self, low: float, high: float) -> None:
         time.sleep(float(self.rng.uniform(low, high)))
 
@@ -157,6 +191,8 @@ class Run:
         self._loop_stop.set()
         if self._loop is not None:
             self._loop.join(GOAL_BOUND_S + 45.0)
+        server = self.processes.get('server')
+        crashed = server is not None and server.proc.poll() is not None
         for name in list(self.processes):
             self.stop(name)
         taken = list(self.localizer.taken) if self.localizer else []
@@ -175,7 +211,15 @@ class Run:
                 'taken': len(taken), 'hangs': len(self.hangs), 'hang_notes': self.hangs,
                 'recovery_s': round(min(after), 3) if after else None, 'notes': self.notes,
                 'wrong': self.h.wrong + [g for g in answered if g.get('ok') is False],
-                'tracebacks': logs.count('Traceback'), 'wall_s': round(time.monotonic() - self.t_start, 1)}
+                'tracebacks': logs.count('Traceback'), 'wall_s': round(time.monotonic() - self.t_start, 1),
+                'crashes': int(crashed), 'outlived': sum(self.outlived(g) for g in answered),
+                'nonfinite_poses': self.h.nonfinite + sum(bool(g.get('nonfinite')) for g in answered),
+                'cancel_max_s': round(max((g['cancel_s'] for g in answered if 'cancel_s' in g), default=0.0), 3)}
+
+    def outlived(self, goal: dict) -> bool:
+        """In flight when a deactivate was sent, answered after it was, and not canceled."""
+        return goal['outcome'] != 'canceled' and any(goal['t0'] < sent and goal['t1'] > answered
+                                                     for sent, answered in self.deactivations)
 
 
 # ---- scenarios --------------------------------------------------------------------------
@@ -264,13 +308,40 @@ def lifecycle_mid_goal(run: Run) -> None:
         steps = [T.TRANSITION_DEACTIVATE, T.TRANSITION_ACTIVATE] if run.rng.uniform() < 0.5 else \
             [T.TRANSITION_DEACTIVATE, T.TRANSITION_CLEANUP, T.TRANSITION_CONFIGURE, T.TRANSITION_ACTIVATE]
         for step in steps:
-            ok = run.h.change_state(step)
-            if ok is None:
-                run.hangs.append(f'change_state {step}: no answer within 15 s')
-            elif not ok:
-                run.notes.append(f'change_state {step} failed')
+            run.transition(step)
             run.sleep_between(0.0, 0.8)
         run.mark(f'lifecycle {steps}')
+    time.sleep(6.0)
+
+
+def lifecycle_by_id(run: Run) -> None:
+    from lifecycle_msgs.msg import Transition as T
+    run.server()          # autostart: active before the lifecycle manager's start-up
+    run.sim()
+    run.loop(BNB, TEMPLATE)
+    for _ in range(2):
+        run.sleep_between(0.5, 2.0)
+        for step in (T.TRANSITION_CONFIGURE, T.TRANSITION_ACTIVATE, 99, T.TRANSITION_CLEANUP):
+            run.transition(step, expected=False)        # none is a transition of the active state
+        run.sleep_between(0.0, 0.8)
+        for step in (T.TRANSITION_DEACTIVATE, T.TRANSITION_CLEANUP, T.TRANSITION_CONFIGURE, T.TRANSITION_ACTIVATE):
+            run.transition(step)
+            run.sleep_between(0.0, 0.5)
+        run.mark('lifecycle by id')
+    time.sleep(6.0)
+
+
+def unprepared_method(run: Run) -> None:
+    from lifecycle_msgs.msg import Transition as T
+    run.server()
+    run.sim()
+    run.loop(SIFT, SLOW_TEMPLATE, BNB)
+    for _ in range(2):
+        run.sleep_between(1.0, 3.0)
+        for step in (T.TRANSITION_DEACTIVATE, T.TRANSITION_ACTIVATE):
+            run.transition(step)
+            run.sleep_between(0.0, 0.5)
+        run.mark('deactivate -> activate')
     time.sleep(6.0)
 
 
@@ -321,7 +392,8 @@ SCENARIOS = {'map_republished': map_republished, 'localizer_late': localizer_lat
              'localizer_drops': localizer_drops, 'laser_late': laser_late,
              'laser_stops': lambda run: laser_stopped(run, signal.SIGTERM),
              'sim_killed': lambda run: laser_stopped(run, signal.SIGKILL),
-             'lifecycle_mid_goal': lifecycle_mid_goal, 'params_mid_goal': params_mid_goal,
+             'lifecycle_mid_goal': lifecycle_mid_goal, 'lifecycle_by_id': lifecycle_by_id,
+             'unprepared_method': unprepared_method, 'params_mid_goal': params_mid_goal,
              'client_killed': client_killed}
 
 

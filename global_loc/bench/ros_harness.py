@@ -53,6 +53,7 @@ class Harness:
         self.truth, self.truths = None, deque(maxlen=4000)      # (stamp ns, pose), newest last
         self.published = []     # every /initialpose: (monotonic time, right at its stamp: True/False/None)
         self.wrong = []         # the wrong ones: pose, truth, stamp
+        self.nonfinite = 0      # /initialpose messages with a NaN or infinite coordinate
         self.node.create_subscription(PoseStamped, '/sim/true_pose', self.on_truth, reliable(10, latched=True))
         self.node.create_subscription(PoseWithCovarianceStamped, '/initialpose', self.on_initialpose, reliable())
         self.set_pose = self.node.create_publisher(PoseStamped, '/sim/set_pose', 10)
@@ -87,6 +88,8 @@ class Harness:
 
     def on_initialpose(self, msg):
         pose = self.pose_from_msg(msg.pose.pose)
+        if not pose.is_finite():
+            self.nonfinite += 1
         ok = self.right_at(pose, msg.header.stamp)
         self.published.append((time.monotonic(), ok))
         if ok is False:          # what the report needs to find it in the server's log
@@ -132,7 +135,8 @@ class Harness:
         return None if response is None else response.results
 
     def change_state(self, transition_id: int, timeout: float = 15.0):
-        """Whether the lifecycle transition succeeded, or None (no answer)."""
+        """Whether the lifecycle transition succeeded, or None (no answer). By transition id
+        with an empty label, as nav2's lifecycle_manager asks."""
         from lifecycle_msgs.msg import Transition
         from lifecycle_msgs.srv import ChangeState
         response = self.call(self.lifecycle, ChangeState.Request(transition=Transition(id=transition_id)), timeout)

@@ -70,6 +70,8 @@ def faults_summary(rows: list[dict]) -> list[dict]:
         rec = [r['recovery_s'] for r in rr if r['recovery_s'] is not None]
         out.append({'scenario': name, 'runs': len(rr), **{k: sum(r[k] for r in rr) for k in (
             'goals', 'answered', 'poses', 'wrong_poses', 'unchecked_poses', 'wrong_results', 'hangs', 'tracebacks')},
+            **{k: sum(r.get(k, 0) for r in rr) for k in ('crashes', 'outlived', 'nonfinite_poses')},
+            'cancel_max_s': max((r.get('cancel_max_s', 0.0) for r in rr), default=0.0),
             'recovered': len(rec), 'recovery_median_s': float(np.median(rec)) if rec else None,
             'recovery_max_s': max(rec) if rec else None, 'errors': sum(r.get('error') is not None for r in rr)})
     return out
@@ -86,21 +88,28 @@ def faults_section(rows: list[dict]) -> list[str]:
              'goals answered `localized` with such a pose. "hangs": a goal unanswered 20 s after it was sent, a '
              'service call unanswered in 15 s, a process not ended 10 s after its signal. "recovery": from the end '
              'of the fault (the last thing the scenario did) to the next right localization (a goal, a published '
-             'pose, or the stand-in localizer taking one).', '',
+             'pose, or the stand-in localizer taking one). "crashes": the server exited before the run\'s end; '
+             '"outlived": goals in flight when a deactivate was sent, answered after it was, not `canceled`; '
+             '"non-finite": poses with a NaN or inf coordinate, published or in a result; "slowest cancel": '
+             'from a cancel request to the goal\'s result.', '',
              '| scenario | runs | goals answered | poses published | wrong poses | wrong results | hangs '
-             '| recovered | recovery median / max [s] | tracebacks in logs | run errors |',
-             '|---|---|---|---|---|---|---|---|---|---|---|']
+             '| recovered | recovery median / max [s] | tracebacks in logs | run errors | crashes | outlived '
+             '| non-finite | slowest cancel [s] |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|']
     for s in faults_summary(rows):
         lines.append(f'| {s["scenario"]} | {s["runs"]} | {s["answered"]} of {s["goals"]} | {s["poses"]} '
                      f'| {s["wrong_poses"]} | {s["wrong_results"]} | {s["hangs"]} | {s["recovered"]} of {s["runs"]} '
                      f'| {s_(s["recovery_median_s"])} / {s_(s["recovery_max_s"])} | {s["tracebacks"]} '
-                     f'| {s["errors"]} |')
+                     f'| {s["errors"]} | {s["crashes"]} | {s["outlived"]} | {s["nonfinite_poses"]} '
+                     f'| {s["cancel_max_s"]:.2f} |')
     total = faults_summary([{**r, 'scenario': 'all'} for r in rows])[0] if rows else None
     if total:
         lines.append(f'| **all** | {total["runs"]} | {total["answered"]} of {total["goals"]} | {total["poses"]} '
                      f'| **{total["wrong_poses"]}** | {total["wrong_results"]} | **{total["hangs"]}** '
                      f'| {total["recovered"]} of {total["runs"]} | {s_(total["recovery_median_s"])} / '
-                     f'{s_(total["recovery_max_s"])} | {total["tracebacks"]} | {total["errors"]} |')
+                     f'{s_(total["recovery_max_s"])} | {total["tracebacks"]} | {total["errors"]} '
+                     f'| **{total["crashes"]}** | **{total["outlived"]}** | **{total["nonfinite_poses"]}** '
+                     f'| {total["cancel_max_s"]:.2f} |')
     return lines + ['']
 
 

@@ -45,6 +45,13 @@ MATCH_BUDGET_BYTES = 1 << 30
 LASER_OFFSET_M = (-100.0, 100.0)
 LASER_ANGLE_RAD = (-2 * math.pi, 2 * math.pi)
 
+# Memory one thesis matcher's precomputation for a map may allocate (the map image blurred,
+# or its keypoints and descriptors: SIFT builds a float pyramid of ~240 bytes a map cell,
+# 3.8 GB at 4000 x 4000 - measured by peak RSS at 2000 x 2000, 236 B/cell). Estimated from the map's
+# size and refused before building. bnb has its own budget (bnb.plane_memory_mb; its grids
+# are bounded by MAX_MAP_CELLS).
+BUILD_BUDGET_BYTES = 1 << 30
+
 # A laser tilted by more than this (roll or pitch away from 0 and from 180 degrees) does
 # not scan a horizontal plane: its ranges are not the map's distances.
 MAX_LASER_TILT_DEG = 5.0
@@ -78,6 +85,14 @@ def check_budget(what: str, nbytes: float, remedy: str) -> None:
     if not nbytes <= budget:
         raise BudgetError(f'{what} would need {format_bytes(nbytes)}, more than the per-goal budget of '
                           f'{format_bytes(budget)}; {remedy}')
+
+
+def check_build_budget(what: str, nbytes: float, remedy: str) -> None:
+    """BudgetError unless a matcher's precomputation (`nbytes`, estimated before building) fits
+    BUILD_BUDGET_BYTES."""
+    if not nbytes <= BUILD_BUDGET_BYTES:
+        raise BudgetError(f'{what} would need about {format_bytes(nbytes)}, more than the budget of '
+                          f'{format_bytes(BUILD_BUDGET_BYTES)} for one matcher\'s precomputation; {remedy}')
 
 
 def format_bytes(nbytes: float) -> str:

@@ -15,7 +15,7 @@ import numpy as np
 
 from .limits import check_angle_step  # the server's and the request's check too
 from .map_io import OccupancyMap
-from .matchers import BranchAndBoundOptions, MatchOptions, make_matcher, resolve_method
+from .matchers import BranchAndBoundOptions, MatchOptions, MethodError, make_matcher, resolve_method
 from .matchers.base import ProgressFn
 from .mount import MountError
 from .outcome import Outcome
@@ -90,11 +90,33 @@ class LocalizationResult:
 
 
 class Localizer:
-    def __init__(self, occupancy_map: OccupancyMap, config: Optional[LocalizerConfig] = None):
+    """`prepared`: the methods built now, with the map, and the only ones served - a request
+    naming another gets a MethodError saying so, instead of a precomputation it cannot
+    cancel, time or bound inside the request (the server: its `methods` parameter). None
+    (the CLI, the benchmark): each matcher is built on first use."""
+
+    def __init__(self, occupancy_map: OccupancyMap, config: Optional[LocalizerConfig] = None,
+                 prepared: Optional[tuple] = None):
         self.map = occupancy_map
         self.config = config or LocalizerConfig()
         self._matchers = {}
+        self._unavailable: dict[str, str] = {}      # prepared method -> why it could not be built
+        self._build_on_use = prepared is None
         self._has_obstacles = bool(occupancy_map.occupied.any())   # once per map, not per scan
+        for method in prepared or ():
+            name = resolve_method(method)
+            try:
+                self._matchers[name] = make_matcher(name, self.map, self.config.bnb)
+            except ValueError as e:     # BudgetError, a MethodError from this OpenCV build
+                self._unavailable[name] = f'{name} could not be prepared for this map: {e}'
+
+    @property
+    def unavailable(self) -> dict[str, str]:
+        """The prepared methods that could not be built, with the reason."""
+        return dict(self._unavailable)
+
+    def prepared(self) -> list[str]:
+        return sorted(self._matchers)
 
     def reconfigured(self, config: LocalizerConfig) -> 'Localizer':
         """This map with `config` (a live parameter change), sharing the matchers already
@@ -102,15 +124,23 @@ class Localizer:
         if config.bnb != self.config.bnb:
             raise ValueError('bnb options change only with a new precomputation (a new Localizer)')
         other = Localizer.__new__(Localizer)
-        other.map, other.config, other._matchers = self.map, config, self._matchers
-        other._has_obstacles = self._has_obstacles
+        other.__dict__.update(self.__dict__)
+        other.config = config
         return other
 
     def matcher(self, method: str):
-        """The matcher for `method`, built (precomputed for this map) on first use."""
+        """The matcher for `method`: built (precomputed for this map) on first use, or, with
+        `prepared`, one of those; MethodError for an unknown, unprepared or unbuildable one,
+        BudgetError for one whose precomputation would not fit the budget."""
         name = resolve_method(method)
-        if name not in self._matchers:
-            self._matchers[name] = make_matcher(name, self.map, self.config.bnb)
+        if name in self._matchers:
+            return self._matchers[name]
+        if name in self._unavailable:
+            raise MethodError(self._unavailable[name])
+        if not self._build_on_use:
+            raise MethodError(f'{name} is not prepared on this server (prepared: {", ".join(self.prepared())}); '
+                              f'add it to the methods parameter and configure again')
+        self._matchers[name] = make_matcher(name, self.map, self.config.bnb)
         return self._matchers[name]
 
     def localize(self, scan: Scan, method: Optional[str] = None, angle_step_deg: Optional[float] = None,

@@ -47,6 +47,15 @@ class InFlight:
                 self.count -= 1
 
 
+def warn_about_peers_once(node, guarded, callback_group, after_s: float = 3.0):
+    """A timer that checks for peers once, `after_s` after start (discovery has seen them)."""
+    def check():
+        timer.cancel()
+        warn_about_peers(node)
+    timer = node.create_timer(after_s, guarded(check), callback_group=callback_group)
+    return timer
+
+
 def warn_about_peers(node) -> None:
     """Another global_loc server on this domain would execute every goal too (both publish
     poses): said once, as an error."""

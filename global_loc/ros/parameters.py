@@ -29,6 +29,9 @@ from ..core.view import ViewConfig
 from .sensors import check_mount_value, sensor_specs
 
 _L, _S, _V = LocalizerConfig(), SupervisorConfig(), ViewConfig()
+# the thesis's matchers, cheap to precompute (a blurred map image; ORB where SURF is missing);
+# SIFT's pyramid costs ~240 bytes a map cell: named in `methods` when wanted
+PREPARED_METHODS = ('template_ccoeff', 'template_sqdiff', 'features')
 NO_RANGE = None
 
 
@@ -89,7 +92,12 @@ SPECS = [
          (1, 1000), live=True),
     Spec('relocalize.settle_s', _S.settle_s, 'after publishing, how long the localizer has to take the pose '
                                              'before it is retried, s', (0.1, 3600.0), live=True),
-    Spec('method', _L.method, f'default matcher: {", ".join(method_names())}', live=True),
+    Spec('method', _L.method, f'default matcher: {", ".join(method_names())}; one of the prepared methods (bnb, '
+                              f'`methods` and the method configured)', live=True),
+    Spec('methods', list(PREPARED_METHODS), 'matchers precomputed with each map, at configure or when a map '
+                                            'arrives, besides bnb and `method`; a goal may name only a prepared '
+                                            'one (one whose precomputation would exceed its memory budget on the '
+                                            'map is refused with the reason)'),
     Spec('angle_step_deg', _L.angle_step_deg, 'rotation step of the template matcher, degrees', limits.ANGLE_STEP_DEG,
          live=True),
     Spec('opening_kernel', _L.closing_kernel, 'kernel of the morphological closing of the local map\'s obstacles '
@@ -123,6 +131,7 @@ class ServerConfig:
     supervisor: SupervisorConfig
     view: ViewConfig = ViewConfig()
     sensors: tuple = ()              # SensorSpec per configured sensor (topics, mountings from parameters)
+    prepared: tuple = ()             # canonical matcher names precomputed with each map (read at configure)
 
     def __getitem__(self, name: str):
         return self.values[name]
@@ -148,7 +157,10 @@ def build_config(values: dict, mounts: dict | None = None) -> ServerConfig:
     except MountError as e:
         raise ConfigError(f'parameter laser_roll: {e}') from None
     try:
-        resolve_method(v['method'])
+        prepared = tuple(dict.fromkeys(resolve_method(m) for m in (v['method'], 'bnb', *v['methods'])))
+    except ValueError as e:
+        raise ConfigError(f'parameter method or methods: {e}') from None
+    try:
         bnb = BranchAndBoundOptions(**{name: v[f'bnb.{name}'] for name, *_ in option_fields()})
     except ValueError as e:
         raise ConfigError(f'parameter {"method" if "method" in str(e) else "bnb.*"}: {e}') from None
@@ -168,7 +180,7 @@ def build_config(values: dict, mounts: dict | None = None) -> ServerConfig:
         sensors = sensor_specs(v['scan_topics'], v['scan_topic'], v['cloud_topics'], mounts or {})
     except ValueError as e:
         raise ConfigError(f'parameter {e}') from None
-    return ServerConfig(dict(values), localizer, supervisor, view, sensors)
+    return ServerConfig(dict(values), localizer, supervisor, view, sensors, prepared)
 
 
 def _descriptor(spec: Spec) -> ParameterDescriptor:
@@ -230,11 +242,13 @@ def read_config(node) -> ServerConfig:
     return build_config(values, mounts)
 
 
-def check_set(current: dict, params, configured: bool) -> SetParametersResult:
+def check_set(current: dict, params, configured: tuple = ()) -> SetParametersResult:
     """The set-parameters callback's answer: a value the server cannot run with is refused
     with the reason; so is, while configured, one that is read only at configure (the
     reason says how to apply it: rclpy passes on no reason of a successful set, so a
-    stored-for-later value could not say so); a live one is accepted (`apply_live`)."""
+    stored-for-later value could not say so); a live one is accepted (`apply_live`).
+    `configured`: the methods prepared at configure (empty: not configured) - a live
+    `method` must be one of them."""
     values = dict(current)
     for p in params:
         if p.name.startswith('sensors.') and p.value is not None:     # None: declared without a value
@@ -252,9 +266,13 @@ def check_set(current: dict, params, configured: bool) -> SetParametersResult:
     if not any(p.name in BY_NAME for p in params):    # only mountings: the others' values are not at stake
         return SetParametersResult(successful=True)
     try:
-        build_config(values)
+        fresh = build_config(values)
     except ConfigError as e:
         return SetParametersResult(successful=False, reason=str(e))
+    if configured and fresh.prepared[0] not in configured:
+        return SetParametersResult(successful=False, reason=(
+            f'method: {values["method"]} is not prepared (prepared: {", ".join(configured)}); add it to methods: '
+            f'deactivate and clean up the node, set both, configure again'))
     return SetParametersResult(successful=True)
 
 
@@ -264,4 +282,4 @@ def apply_live(active: ServerConfig, params) -> ServerConfig:
     if not live:
         return active
     fresh = build_config({**active.values, **live}, {s.topic: s.mount for s in active.sensors})
-    return replace(fresh, localizer=replace(fresh.localizer, bnb=active.localizer.bnb))
+    return replace(fresh, localizer=replace(fresh.localizer, bnb=active.localizer.bnb), prepared=active.prepared)

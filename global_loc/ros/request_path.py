@@ -20,6 +20,7 @@ from global_loc_interfaces.action import Localize
 
 from ..core.limits import BudgetError
 from ..core.map_slot import MapSlot
+from ..core.matchers import MethodError
 from ..core.mount import LaserMount
 from ..core.outcome import CanceledError, Outcome, Stage
 from ..core.pose_history import PoseHistory
@@ -59,6 +60,15 @@ class RequestPath:
         self.active = False
         self.stopping = threading.Event()       # set: running work ends (deactivate, cleanup, shutdown)
         self.busy = threading.Lock()
+        # One per configuration served: a request admitted under an earlier one ends canceled
+        # at its next step even when the server is active again (deactivate -> activate).
+        self.epoch = 0
+
+    def stop(self) -> None:
+        """Stop accepting work; what runs ends canceled at its next step, whatever follows."""
+        self.active = False
+        self.epoch += 1
+        self.stopping.set()
 
     # ---- admit and validate ------------------------------------------------------------
     def serve(self, fields: dict, origin: str, cancelled=lambda: False, feedback=lambda *a: None) -> Localize.Result:
@@ -68,13 +78,17 @@ class RequestPath:
         if not self.busy.acquire(blocking=False):
             return self.end_early(Outcome.BUSY, 'busy: another localization is running (one at a time); retry when '
                                              'it ends', throttle=True)
+        epoch = self.epoch
+
+        def gone() -> bool:       # the configuration this request was admitted under has ended
+            return self.stopping.is_set() or self.epoch != epoch
         try:
             request = make_request(self.c.config().request_defaults(), origin=origin, **fields)
-            return self.run(request, lambda: cancelled() or self.stopping.is_set(), feedback)
+            return self.run(request, lambda: cancelled() or gone(), feedback)
         except RequestError as e:
             return self.end_early(Outcome.BAD_GOAL, f'bad request: {e}')
         except CanceledError:
-            reason = 'canceled' if not self.stopping.is_set() else 'canceled: the server is stopping'
+            reason = 'canceled' if not gone() else 'canceled: the server is stopping'
             self.c.logger.info(reason)
             return ended_result(Outcome.CANCELED, reason)
         except Exception as e:   # an internal error must end this request, not the node
@@ -103,6 +117,10 @@ class RequestPath:
         if maps.built is None or not self.c.maps.is_current(maps.generation):
             return self.end_early(Outcome.NO_MAP, maps.error or 'a newer map is still being prepared; retry')
         localizer = maps.built.reconfigured(self.c.config().localizer)
+        try:
+            localizer.matcher(request.method)       # prepared with the map, or refused now: never built here
+        except MethodError as e:
+            return self.end_early(Outcome.BAD_GOAL, f'bad request: {e}')
         newest = self.wait_for_view(request, start, cancelled, feedback)
         if newest is None:
             return self.end_early(Outcome.NO_SCAN, f'no {self.wanted()} within {seconds(request.scan_timeout_s)} s')
@@ -123,6 +141,8 @@ class RequestPath:
         specs = self.c.sensors.specs
         if len(specs) > 1 or specs[0].kind != 'scan':     # one laser alone: its messages as they always were
             result = dataclasses.replace(result, message=f'{result.message} [{view.summary()}]')
+        if cancelled():     # asked to end, or its configuration ended, after the search's last step
+            raise CanceledError()
         return self.publish(request, result, shown, maps.generation, localizer.map, start)
 
     def resolve_by_motion(self, result, messages: dict, request: Request, localizer, cancelled, feedback,

@@ -40,7 +40,7 @@ from ..core.newest_message import NewestMessage
 from ..core.outcome import Outcome
 from ..core.pose_history import PoseHistory
 from .convert import map_from_msg, pose_from_msg, stamp_seconds
-from .guards import InFlight, answer_every_change_state, guard, warn_about_peers
+from .guards import InFlight, answer_every_change_state, guard, warn_about_peers_once
 from .motion import resolve_by_motion
 from .node_main import exit_process, run_node
 from .parameters import BY_NAME, ConfigError, apply_live, check_set, declare_parameters, parameter_value, read_config
@@ -91,7 +91,7 @@ class GlobalLocServer(LifecycleNode):
         self.create_service(Trigger, '~/trigger', self.guarded(self.on_trigger), callback_group=self.group)
         self.create_service(Empty, '~/reinitialize_global_localization', self.guarded(self.on_reinitialize),
                             callback_group=self.group)
-        self.peer_check = self.create_timer(3.0, self.guarded(self.check_peers), callback_group=self.group)
+        self.peer_check = warn_about_peers_once(self, self.guarded, self.group)
         autostart = self.get_parameter('autostart').value
         if autostart:
             self.trigger_configure()
@@ -191,17 +191,18 @@ class GlobalLocServer(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def stop_work(self, timeout: float = 2.0) -> None:
-        """Stop accepting work and end a running localization (canceled); wait for it to end."""
+        """Stop accepting work, end a running localization (canceled), wait for it to end; one
+        still running then ends at its next step, publishing nothing (RequestPath.epoch)."""
         self.wind_down()
-        if self.path.busy.acquire(timeout=timeout):
-            self.path.busy.release()
+        if not self.path.busy.acquire(timeout=timeout):
+            return self.get_logger().warn(f'a localization still runs {timeout:g} s after the stop: it ends canceled')
+        self.path.busy.release()
 
     def wind_down(self):
         """run_node's first step on SIGINT/SIGTERM, while the executor still spins: stop
         accepting work and end what runs (a goal ends canceled, "the server is stopping");
         returns whether it is all over."""
-        self.path.active = False
-        self.path.stopping.set()
+        self.path.stop()
         return lambda: self.in_flight.count == 0
 
     def close(self) -> None:
@@ -213,7 +214,7 @@ class GlobalLocServer(LifecycleNode):
         configure (the reasons say why); live ones apply to the next request."""
         current = self.config.values if self.config is not None else \
             {name: parameter_value(self, name) for name in BY_NAME}
-        return check_set(current, params, configured=self.config is not None)
+        return check_set(current, params, configured=self.config.prepared if self.config is not None else ())
 
     def on_parameters_set(self, params) -> None:
         for p in params:
@@ -229,16 +230,18 @@ class GlobalLocServer(LifecycleNode):
 
     # ---- maps, odometry, health -------------------------------------------------------------
     def build_localizer(self, load) -> Localizer:
-        """The map `load()` gives, with the default method (and bnb, for the watch's fit)
-        precomputed now - in the map builder, not in the first request or health tick."""
+        """The map `load()` gives, with every prepared method (`method`, bnb - the watch's
+        fit - and `methods`) precomputed now, in the map builder: a goal never builds one
+        (it could not cancel, time or bound the build); one that cannot be built on this
+        map is refused to goals with the reason."""
         config = self.config
         occupancy_map = load()
-        localizer = Localizer(occupancy_map, config.localizer)
         t0 = time.perf_counter()
-        for method in dict.fromkeys((config['method'], WATCH_METHOD)):
-            localizer.matcher(method)
+        localizer = Localizer(occupancy_map, config.localizer, prepared=config.prepared)
+        for reason in localizer.unavailable.values():
+            self.get_logger().error(f'{reason}; goals naming it are refused')
         self.get_logger().info(f'map {occupancy_map.source}: {occupancy_map.width} x {occupancy_map.height} cells '
-                               f'at {occupancy_map.resolution} m; {config["method"]} ready in '
+                               f'at {occupancy_map.resolution} m; {", ".join(localizer.prepared())} ready in '
                                f'{time.perf_counter() - t0:.2f} s')
         return localizer
 
@@ -304,11 +307,6 @@ class GlobalLocServer(LifecycleNode):
         """Accept every cancel; the search stops at its next progress report."""
         self.get_logger().info('cancel requested')
         return CancelResponse.ACCEPT
-
-    def check_peers(self) -> None:
-        """Once, a few seconds after start (discovery has seen the others)."""
-        self.peer_check.cancel()
-        warn_about_peers(self)
 
     def execute(self, goal_handle):
         """The action: serve the goal, then end it as its outcome says."""

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from typing import Optional
 
+from ..limits import check_build_budget
 from .base import Candidate, Match, Matcher, MatchOptions, MethodError
 from .bnb import BranchAndBoundMatcher, BranchAndBoundOptions
 from .features import FeatureMatcher, make_detector, surf_available
@@ -36,11 +37,24 @@ def resolve_method(name: str) -> str:
     return name
 
 
+# Peak bytes a thesis matcher's precomputation allocates per map cell (peak RSS measured at
+# 2000 x 2000: templates and ORB 9, SIFT 236; SURF's Hessian pyramid and AKAZE's nonlinear
+# scale space are float images per level as SIFT's: counted alike, not measured - this
+# OpenCV build has neither).
+BUILD_BYTES_PER_CELL = {'template_ccoeff': 16, 'template_sqdiff': 16, 'features_orb': 24, 'features_sift': 256,
+                        'features_akaze': 256, 'features_surf': 256}
+
+
 def make_matcher(name: str, occupancy_map, bnb_options: Optional[BranchAndBoundOptions] = None) -> Matcher:
-    """The matcher `name` built for `occupancy_map` (bnb with `bnb_options`)."""
+    """The matcher `name` built for `occupancy_map` (bnb with `bnb_options`); BudgetError,
+    before anything is allocated, when a thesis matcher's precomputation would not fit
+    limits.BUILD_BUDGET_BYTES."""
     name = resolve_method(name)
     if name == 'bnb':
         return BranchAndBoundMatcher(occupancy_map, bnb_options)
+    cells = occupancy_map.width * occupancy_map.height
+    check_build_budget(f'{name} on a {occupancy_map.width} x {occupancy_map.height} map',
+                       BUILD_BYTES_PER_CELL[name] * cells, 'use bnb, or template matching, on a map this size')
     return _FACTORIES[name](occupancy_map)
 
 
