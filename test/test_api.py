@@ -194,11 +194,13 @@ def test_an_exception_in_the_feedback_callback_cancels_the_goal(office):
             raise RuntimeError('a bug in the caller\'s feedback callback')
 
     before = server.output().count('published on /initialpose')
+    canceled = server.output().count('global_loc_server]: canceled')
     with pytest.raises(RuntimeError, match='feedback callback'):
         api.localize(method='template_ccoeff', angle_step_deg=0.2, timeout_s=10.0, feedback=broken)
     deadline = time.monotonic() + 10
-    while 'canceled' not in server.output().split('a bug')[-1] and time.monotonic() < deadline:
-        time.sleep(0.1)
+    while server.output().count('global_loc_server]: canceled') == canceled and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert server.output().count('global_loc_server]: canceled') == canceled + 1, server.output()
     result = api.localize(timeout_s=10.0, publish=False)
     assert result.success, (result, server.output())
     assert server.output().count('published on /initialpose') == before, server.output()

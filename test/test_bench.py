@@ -132,11 +132,15 @@ def test_the_fault_table_is_built_from_the_runs_rows_per_scenario_and_in_all():
     from global_loc.bench.sections import faults_section
     rows = [fault_row('laser_late', recovery_s=2.0), fault_row('laser_late', recovery_s=4.0, goals=12, answered=11,
                                                                hangs=1),
-            fault_row('map_republished', wrong_poses=1, recovery_s=None)]
+            fault_row('map_republished', wrong_poses=1, recovery_s=None, crashes=1, outlived=2, nonfinite_poses=1,
+                      cancel_max_s=0.25)]
     table = [line for line in faults_section(rows) if line.startswith('| ')]
-    assert table[1] == '| laser_late | 2 | 21 of 22 | 16 | 0 | 0 | 1 | 2 of 2 | 3.00 / 4.00 | 0 | 0 |'
-    assert table[2] == '| map_republished | 1 | 10 of 10 | 8 | 1 | 0 | 0 | 0 of 1 | – / – | 0 | 0 |'
-    assert table[3] == '| **all** | 3 | 31 of 32 | 24 | **1** | 0 | **1** | 2 of 3 | 3.00 / 4.00 | 0 | 0 |'
+    assert table[1] == ('| laser_late | 2 | 21 of 22 | 16 | 0 | 0 | 1 | 2 of 2 | 3.00 / 4.00 | 0 | 0 '
+                        '| 0 | 0 | 0 | 0.00 |')
+    assert table[2] == ('| map_republished | 1 | 10 of 10 | 8 | 1 | 0 | 0 | 0 of 1 | – / – | 0 | 0 '
+                        '| 1 | 2 | 1 | 0.25 |')
+    assert table[3] == ('| **all** | 3 | 31 of 32 | 24 | **1** | 0 | **1** | 2 of 3 | 3.00 / 4.00 | 0 | 0 '
+                        '| **1** | **2** | **1** | 0.25 |')
 
 
 @pytest.mark.ros

@@ -1,8 +1,8 @@
 """The pipeline: scan -> points -> matcher (distinct hypotheses) -> verdict -> base pose.
 
-`Localizer` holds one map and the matchers built for it (each built on first use and
-kept, so a server pays a matcher's precomputation once). The ROS server, the CLI and
-the benchmark all call `Localizer.localize`.
+`Localizer` holds one map and the matchers built for it, each once: the server's are
+prepared with the map (a request never builds one), the CLI's and the benchmark's on first
+use. The ROS server, the CLI and the benchmark all call `Localizer.localize`.
 """
 from __future__ import annotations
 
