@@ -105,6 +105,10 @@ def result_fields(result) -> dict:
                success=result.success, confidence=round(result.confidence, 4),
                time_s=round(result.time_s, 4), message=result.message,
                hypotheses=[{**h.pose.as_dict(), 'score': round(h.score, 5)} for h in result.hypotheses])
+    if result.raw is not None:       # a thesis matcher's own verdict, before the map check
+        raw = result.raw
+        out['raw'] = {'outcome': raw.outcome.label, 'success': raw.success, 'confidence': round(raw.confidence, 4),
+                      **(raw.pose.as_dict() if raw.pose is not None else {})}
     stats = result.search_stats
     if getattr(stats, 'search_s', None) is not None:     # bnb: what its search did, to tell why one was slow
         out['search'] = {'expansions': stats.expansions, 'headings': stats.angles, 'points': stats.points,
@@ -138,7 +142,8 @@ def localize_main(args) -> int:
     mount, mounting = (LaserMount(Rigid2D()), None) if several else laser_mounting(args)
     base_T_laser = mount.base_T_laser
     config = LocalizerConfig(method=args.method, angle_step_deg=args.angle_step, closing_kernel=args.closing_kernel,
-                             bnb=bnb, max_search_s=args.max_search_s, base_T_laser=base_T_laser)
+                             bnb=bnb, max_search_s=args.max_search_s, base_T_laser=base_T_laser,
+                             verify=not args.no_verify)
     localizer = Localizer(occupancy_map, config)
     method = localizer.matcher(args.method).name   # unknown method: fail before reading any scan
     if several:
@@ -237,6 +242,9 @@ def build_parser() -> argparse.ArgumentParser:
                                                            'nav_msgs/Odometry topic (several sensors: used when '
                                                            'present, to move each reading to the view\'s stamp)')
     loc.add_argument('--method', default=LocalizerConfig.method, help=f'one of: {", ".join(method_names())}')
+    loc.add_argument('--no-verify', action='store_true',
+                     help="thesis matchers: their own verdict, as the thesis reported it, without bnb's map check "
+                          '(the server always checks); each line carries the raw verdict as "raw" either way')
     loc.add_argument('--angle-step', type=float, default=LocalizerConfig.angle_step_deg, help='Δα, degrees')
     loc.add_argument('--max-search-s', type=float, default=math.inf,
                      help='seconds a search may take, then "search incomplete" (default: no limit)')

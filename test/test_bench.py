@@ -42,19 +42,23 @@ def test_search_share_table_splits_bnb_time_into_the_search_and_the_rest():
 
 
 def test_the_report_opens_with_one_line_per_suite_against_the_thesis_method():
-    from global_loc.bench.summary import summary_section
+    from global_loc.bench.summary import summary_section, thesis_section
 
     def row(method, ok, success, t, **kw):
         return {'suite': 'cut', 'method': method, 'ok': ok, 'ok_loose': ok, 'success': success, 'time_s': t, **kw}
     rows = [row('bnb', True, True, 0.01), row('bnb', True, True, 0.03), row('bnb', False, False, 0.02),
-            row('template_ccoeff', True, True, 1.0), row('template_ccoeff', False, True, 2.0),
-            row('template_ccoeff', False, False, 3.0),
+            row('template_ccoeff', True, True, 1.0, raw_success=True, raw_ok=True),
+            row('template_ccoeff', False, True, 2.0),                    # no raw verdict (nothing was checked)
+            row('template_ccoeff', False, False, 3.0, raw_success=True, raw_ok=False),   # the check refused it
             row('template_ccoeff', True, True, 9.0, angle_step=15)]      # the thesis method's variant: left out
     lines = summary_section(rows)
     assert lines[0] == '## Summary'
     line = next(x for x in lines if x.startswith('| cut |'))
-    # bnb: 2 of 3 right, none confidently wrong, median 0.02; thesis: 1 of 3 right, 1 confidently wrong, median 2.0
-    assert line.endswith('| 3 | 67% | 0% | 0.020 | 0.029 | 3 | 33% | 33% | 2.00 | 2.90 | 100× |'), line
+    # bnb: 2 of 3 right, none confidently wrong, median 0.02; thesis raw: 1 of 3 right, 2 confidently wrong;
+    # checked: 1 of 3 right, 1 confidently wrong, median 2.0
+    assert line.endswith('| 3 | 67% | 0% | 0.020 | 0.029 | 3 | 33% | 67% | 33% | 33% | 2.00 | 2.90 | 100× |'), line
+    thesis = thesis_section(rows)
+    assert '| cut | template_ccoeff | 3 | 33% | 67% | 33% | 33% | 2.00 | 2.90 |' in thesis, thesis
 
 
 def test_the_report_is_written_again_from_its_rows_without_running_anything(tmp_path):

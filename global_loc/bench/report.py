@@ -17,7 +17,7 @@ from .changed import changed_section  # noqa: E402
 from .follow import follow_section  # noqa: E402
 from .sections import faults_section, prior_section, scaling_section, soak_section  # noqa: E402
 from .sensors import sensors_section  # noqa: E402
-from .summary import summary_section  # noqa: E402
+from .summary import summary_section, thesis_section  # noqa: E402
 from .tables import BASELINE, group, pct, save_figure, secs, stats  # noqa: E402
 
 BENCHMARKS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
@@ -141,6 +141,7 @@ def write_report(rows, meta, out, maps, trials) -> None:
     committed = os.path.abspath(out) == RESULTS      # the hand-written reading belongs to the committed report
     md = ['# global_loc benchmark' + (' (quick)' if meta['quick'] else ''), '']
     md += summary_section(rows + meta.get('scaling', []), RESULTS if committed else None)
+    md += thesis_section(rows)
     md += header(rows, meta)
     if committed and os.path.exists(READING):
         md += [open(READING).read(), '']

@@ -37,6 +37,9 @@ def run_job(job):
                top4_ok=any(pose_correct(h.pose, trial.truth) for h in res.hypotheses[:4]),
                hyp_scores=[round(h.score, 4) for h in res.hypotheses[:4]], message=res.message.split(':')[0],
                outcome=res.outcome.label)
+    if res.raw is not None:      # a thesis matcher checked on the map: its own verdict too (the thesis's numbers)
+        row.update(raw_success=res.raw.success, raw_outcome=res.raw.outcome.label,
+                   raw_ok=res.raw.pose is not None and pose_correct(res.raw.pose, trial.truth))
     search_s = getattr(res.search_stats, 'search_s', None)
     if search_s is not None:      # bnb: the search proper, apart from the fixed work around it
         row.update(search_s=search_s, expansions=res.search_stats.expansions, settled=res.search_stats.settled,

@@ -17,6 +17,7 @@ from .limits import check_angle_step  # the server's and the request's check too
 from .map_io import OccupancyMap
 from .matchers import BranchAndBoundOptions, MatchOptions, MethodError, make_matcher, resolve_method
 from .matchers.base import ProgressFn
+from .matchers.verify import RawVerdict, check_options, scaled, verify
 from .mount import MountError
 from .outcome import Outcome
 from .scan import Scan, ScanPoints, require_shape, scan_to_points
@@ -38,6 +39,9 @@ class LocalizerConfig:
     # Seconds a search may take before it answers `search incomplete` with what it explored
     # (the server sets a few seconds: a goal must end; the CLI and benchmark: no limit).
     max_search_s: float = math.inf
+    # Judge a thesis matcher's hypotheses with bnb's verdict and check the rest of the map
+    # for a rival (matchers/verify.py); False: its own verdict, as the thesis reported it.
+    verify: bool = True
 
 
 class NonFinitePose(ValueError):
@@ -74,6 +78,7 @@ class LocalizationResult:
     dropped: dict = field(default_factory=dict)
     search_stats: Any = None   # what the matcher's search did (bnb: SearchStats), for diagnostics
     region: Optional[SearchRegion] = None   # the search prior as searched (widened to the search's resolution)
+    raw: Optional[RawVerdict] = None        # a checked thesis matcher's own verdict (laser pose: base pose here)
 
     def __setattr__(self, name, value):
         # the one door every pose goes through, set at construction or after: never NaN or inf
@@ -143,6 +148,13 @@ class Localizer:
         self._matchers[name] = make_matcher(name, self.map, self.config.bnb)
         return self._matchers[name]
 
+    @staticmethod
+    def kept(candidates: list, region, laser_T_base: Rigid2D, bounded: bool) -> list:
+        """The candidates with a finite pose and score (whatever a matcher made of a
+        degenerate input), inside the search prior when there is one."""
+        out = [c for c in candidates if all(map(math.isfinite, (*c.laser_pose.as_tuple(), c.score)))]
+        return [c for c in out if region.contains(c.laser_pose * laser_T_base)] if bounded else out
+
     def localize(self, scan: Scan, method: Optional[str] = None, angle_step_deg: Optional[float] = None,
                  progress: Optional[ProgressFn] = None, base_T_laser: Optional[Rigid2D] = None,
                  region: Optional[SearchRegion] = None) -> LocalizationResult:
@@ -178,19 +190,24 @@ class Localizer:
             return LocalizationResult(Outcome.NO_MATCH, f'the map {self.map.source} has no obstacles (no occupied '
                                                         f'cell) to match a scan against', matcher.name,
                                       time_s=time.perf_counter() - t0, dropped=points.dropped)
-        found = matcher.match(require_shape(points), options, progress)
-        # never a non-finite pose or score, whatever a matcher made of a degenerate input
-        candidates = [c for c in found.candidates if all(map(math.isfinite, (*c.laser_pose.as_tuple(), c.score)))]
-        if bounded:
-            candidates = [c for c in candidates if region.contains(c.laser_pose * laser_T_base)]
+        checking = cfg.verify and matcher.name != 'bnb'
+        found = matcher.match(require_shape(points), options, scaled(progress, 0.0, 0.9) if checking else progress)
+        candidates = self.kept(found.candidates, region, laser_T_base, bounded)
         # the matcher decided which hypotheses are distinct; the verdict judges them as they are
         verdict = matcher.judge(candidates, found.stopped, found.settled)
+        raw = None
+        if checking and candidates and not found.stopped:     # a stopped search is never a success anyway
+            raw = RawVerdict(verdict.outcome, verdict.confidence, verdict.message,
+                             candidates[0].laser_pose * laser_T_base)
+            found, verdict = verify(matcher.name, candidates, points, self.matcher('bnb'), check_options(
+                options, cfg.max_search_s - (time.perf_counter() - t0)), scaled(progress, 0.9, 1.0))
+            candidates = self.kept(found.candidates, region, laser_T_base, bounded)
         hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in candidates]
         message = f'{verdict.message}; {widened}' if widened else verdict.message
         result = LocalizationResult(verdict.outcome, message, matcher.name, confidence=verdict.confidence,
                                     hypotheses=hyps, time_s=time.perf_counter() - t0, dropped=points.dropped,
                                     covariance=np.diag([cfg.covariance_xy, cfg.covariance_xy, cfg.covariance_yaw]),
-                                    search_stats=found.stats, region=region if bounded else None)
+                                    search_stats=found.stats, region=region if bounded else None, raw=raw)
         if hyps:
             result.pose, result.score = hyps[0].pose, hyps[0].score
             if candidates[0].covariance is not None:
