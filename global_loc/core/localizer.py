@@ -78,7 +78,7 @@ class LocalizationResult:
     dropped: dict = field(default_factory=dict)
     search_stats: Any = None   # what the matcher's search did (bnb: SearchStats), for diagnostics
     region: Optional[SearchRegion] = None   # the search prior as searched (widened to the search's resolution)
-    raw: Optional[RawVerdict] = None        # a checked thesis matcher's own verdict (laser pose: base pose here)
+    raw: Optional[RawVerdict] = None        # a checked thesis matcher's own verdict (its pose: the base's)
 
     def __setattr__(self, name, value):
         # the one door every pose goes through, set at construction or after: never NaN or inf

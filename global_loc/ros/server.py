@@ -194,9 +194,10 @@ class GlobalLocServer(LifecycleNode):
         """Stop accepting work, end a running localization (canceled), wait for it to end; one
         still running then ends at its next step, publishing nothing (RequestPath.epoch)."""
         self.wind_down()
-        if not self.path.busy.acquire(timeout=timeout):
-            return self.get_logger().warn(f'a localization still runs {timeout:g} s after the stop: it ends canceled')
-        self.path.busy.release()
+        if self.path.busy.acquire(timeout=timeout):
+            self.path.busy.release()
+        else:
+            self.get_logger().warn(f'a localization still runs {timeout:g} s after the stop: it ends canceled')
 
     def wind_down(self):
         """run_node's first step on SIGINT/SIGTERM, while the executor still spins: stop

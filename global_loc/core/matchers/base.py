@@ -48,17 +48,19 @@ DISTINCT_M = 1.0
 DISTINCT_ANGLE = math.radians(20.0)
 
 
+def apart(a: Candidate, b: Candidate, min_distance: float, min_angle: float) -> bool:
+    """Whether two candidates are distinct places: min_distance metres *or* min_angle radians apart."""
+    d, angle = a.laser_pose.distance_to(b.laser_pose)
+    return d >= min_distance or angle >= min_angle
+
+
 def distinct(candidates: list[Candidate], k: int, min_distance: float, min_angle: float) -> list[Candidate]:
     """Non-maximum suppression in (x, y, yaw): the best k candidates no two of which are
     within min_distance metres *and* min_angle radians of each other. The one place a
     matcher's candidates become distinct hypotheses."""
     kept: list[Candidate] = []
-    def apart(c, o):
-        d, a = c.laser_pose.distance_to(o.laser_pose)
-        return d >= min_distance or a >= min_angle
-
     for c in sorted(candidates, key=lambda c: -c.score):
-        if all(apart(c, o) for o in kept):
+        if all(apart(c, o, min_distance, min_angle) for o in kept):
             kept.append(c)
             if len(kept) == k:
                 break

@@ -17,7 +17,7 @@ from typing import Optional
 from ..outcome import Outcome
 from ..scan import ScanPoints
 from ..transform import Rigid2D
-from .base import Candidate, Match, Matcher, MatchOptions, ProgressFn, Verdict
+from .base import Candidate, Match, MatchOptions, ProgressFn, Verdict, apart
 
 
 @dataclass(frozen=True)
@@ -43,11 +43,6 @@ def refined_on_map(checker, candidates: list[Candidate], points: ScanPoints) -> 
     return out
 
 
-def same_place(a: Candidate, b: Candidate, matcher: Matcher) -> bool:
-    d, angle = a.laser_pose.distance_to(b.laser_pose)
-    return d < matcher.distinct_m and angle < matcher.distinct_angle
-
-
 def verify(proposer: str, proposals: list[Candidate], points: ScanPoints, checker, options: MatchOptions,
            progress: Optional[ProgressFn] = None) -> tuple[Match, Verdict]:
     """The checked hypotheses (the proposals refined and bnb's rivals, distinct, best
@@ -59,7 +54,7 @@ def verify(proposer: str, proposals: list[Candidate], points: ScanPoints, checke
     checked = Match(union, rivals.stats, rivals.stopped, rivals.settled)
     if not verdict.success:
         return checked, Verdict(verdict.outcome, verdict.confidence, f'{verdict.message} (map check of {proposer})')
-    if refined and same_place(refined[0], union[0], checker):
+    if refined and not apart(refined[0], union[0], checker.distinct_m, checker.distinct_angle):
         return checked, verdict
     return checked, Verdict(Outcome.AMBIGUOUS, 0.0, f'ambiguous: the map explains another place better than '
                                                     f'{proposer}\'s best (map check); see the hypotheses')
