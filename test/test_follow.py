@@ -20,7 +20,7 @@ from test_bag import laser_scan
 
 from conftest import SHARED_DATA, aisles_with_a_box, assert_pose_near, symmetric_room
 from global_loc.bench.relocalization import turning_observations
-from global_loc.core.localizer import Localizer
+from global_loc.core.localizer import Localizer, LocalizerConfig
 from global_loc.core.map_io import save_map_yaml
 from global_loc.core.motion import SETTLE_PERIOD_S, HypothesisFollower
 from global_loc.core.outcome import Outcome
@@ -51,12 +51,12 @@ class Turn:
     localizer: CountingLocalizer
 
 
-def follow_a_turn(world, seed=1, max_scans=None) -> Turn:
-    """One scan at the world's start, then its hypotheses followed while the robot turns in
-    place (one turn, or max_scans scans), until one settles."""
+def follow_a_turn(world, seed=1, max_scans=None, method='bnb') -> Turn:
+    """One scan at the world's start (localized by `method`), then its hypotheses followed
+    while the robot turns in place (one turn, or max_scans scans), until one settles."""
     make_map, start, laser = world
     m = make_map()
-    sim, localizer = Simulator(m, laser, seed=seed), CountingLocalizer(m)
+    sim, localizer = Simulator(m, laser, seed=seed), CountingLocalizer(m, LocalizerConfig(method=method))
     try:
         sim.place(start)
         single = localizer.localize(sim.scan(), base_T_laser=BASE_T_LASER)
@@ -92,6 +92,17 @@ def test_twin_aisle_ends_settle_on_the_true_place_while_turning(seed):
     assert outcome.scans == len(turn.used) == round(outcome.elapsed_s / 0.1)
     # one search of the fused view per second of scan time at most (and one when it settled)
     assert 1 <= turn.localizer.fused_searches <= outcome.elapsed_s / SETTLE_PERIOD_S + 1
+
+
+@pytest.mark.parametrize('method', ['template_ccoeff', 'template_sqdiff'])
+def test_a_thesis_matchers_ambiguous_answer_is_followed_and_settled_by_the_tracker(method):
+    """The thesis matchers score no scan at a given pose (they are not Trackers): the
+    follower of a server configured for one tracks with bnb, as Localizer.tracker says."""
+    turn = follow_a_turn(AISLE_END, 1, method=method)
+    assert turn.single.method == method and turn.follower.tracker.name == 'bnb'
+    outcome = turn.follower.finish()
+    assert outcome.settled and outcome.result.outcome == Outcome.LOCALIZED, outcome.result.message
+    assert_pose_near(outcome.result.pose, turn.truth, 0.1, 2.0)
 
 
 def test_a_symmetric_room_stays_ambiguous_after_a_full_turn():

@@ -62,3 +62,14 @@ def test_the_cli_prints_the_raw_verdict_and_no_verify_gives_the_thesis_answer(of
                  '--no-verify']) == 0
     raw = json.loads(capsys.readouterr().out)
     assert raw['success'] and raw['error_xy'] > 0.2 and 'raw' not in raw, raw
+
+
+def test_only_a_matcher_that_scores_a_pose_is_a_tracker_and_the_localizer_says_which_tracks(office_map):
+    from global_loc.core.matchers import TRACKER_METHOD, Tracker
+    localizer = Localizer(office_map, LocalizerConfig(method='template_ccoeff'))
+    assert isinstance(localizer.matcher('bnb'), Tracker)
+    for method in ('template_ccoeff', 'template_sqdiff', 'features_orb'):
+        assert not isinstance(localizer.matcher(method), Tracker)
+        assert localizer.tracker(method).name == TRACKER_METHOD
+    assert localizer.tracker() is localizer.matcher(TRACKER_METHOD)
+    assert localizer.tracker('bnb') is localizer.matcher('bnb')

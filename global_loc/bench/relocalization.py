@@ -74,7 +74,7 @@ def watch(name, m, localizer, sim, minutes: float, rng) -> list[dict]:
     (cx, cy), clearance = open_spot(m)
     radius = min(1.0, max(0.3, clearance - 0.6))
     sim.place(Rigid2D(cx, cy - radius, 0.0))
-    matcher = localizer.matcher('bnb')
+    matcher = localizer.tracker()
     config = SupervisorConfig(auto_relocalize=True)
     sup = Supervisor(config, now=0.0)
     sup.on_pose(0.0)
@@ -133,7 +133,7 @@ def relocalization_rows(maps: dict, poses_per_map: int, watch_minutes: float, se
         try:
             for pose in sample_free_poses(m, poses_per_map, rng, clearance=0.5):
                 rows.append(kidnap_and_turn(name, m, localizer, sim, pose))
-                rows.append(fit_row('sim', localizer.matcher('bnb'), m, scan_to_points(sim.scan()),
+                rows.append(fit_row('sim', localizer.tracker(), m, scan_to_points(sim.scan()),
                                     sim.laser_pose(), rng))
             rows += watch(name, m, localizer, sim, watch_minutes, rng)
         finally:
@@ -143,5 +143,5 @@ def relocalization_rows(maps: dict, poses_per_map: int, watch_minutes: float, se
     for t in carmen_trials:
         m = carmen_maps[t.map_name]
         loc = localizers.setdefault(t.map_name, Localizer(m))
-        rows.append(fit_row('carmen', loc.matcher('bnb'), m, scan_to_points(t.scan), t.truth, rng))
+        rows.append(fit_row('carmen', loc.tracker(), m, scan_to_points(t.scan), t.truth, rng))
     return rows

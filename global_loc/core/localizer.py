@@ -15,7 +15,15 @@ import numpy as np
 
 from .limits import check_angle_step  # the server's and the request's check too
 from .map_io import OccupancyMap
-from .matchers import BranchAndBoundOptions, MatchOptions, MethodError, make_matcher, resolve_method
+from .matchers import (
+    TRACKER_METHOD,
+    BranchAndBoundOptions,
+    MatchOptions,
+    MethodError,
+    Tracker,
+    make_matcher,
+    resolve_method,
+)
 from .matchers.base import ProgressFn
 from .matchers.verify import RawVerdict, check_options, scaled, verify
 from .mount import MountError
@@ -148,6 +156,13 @@ class Localizer:
         self._matchers[name] = make_matcher(name, self.map, self.config.bnb)
         return self._matchers[name]
 
+    def tracker(self, method: Optional[str] = None) -> Tracker:
+        """The matcher that scores a scan at a given pose, for the follower, the watch and
+        the map check of a proposing matcher: `method` (default: the configured one) when
+        it is a Tracker, otherwise matchers.TRACKER_METHOD (the reason is written there)."""
+        matcher = self.matcher(method or self.config.method)
+        return matcher if isinstance(matcher, Tracker) else self.matcher(TRACKER_METHOD)
+
     @staticmethod
     def kept(candidates: list, region, laser_T_base: Rigid2D, bounded: bool) -> list:
         """The candidates with a finite pose and score (whatever a matcher made of a
@@ -190,7 +205,8 @@ class Localizer:
             return LocalizationResult(Outcome.NO_MATCH, f'the map {self.map.source} has no obstacles (no occupied '
                                                         f'cell) to match a scan against', matcher.name,
                                       time_s=time.perf_counter() - t0, dropped=points.dropped)
-        checking = cfg.verify and matcher.name != 'bnb'
+        tracker = self.tracker(matcher.name)
+        checking = cfg.verify and matcher is not tracker
         found = matcher.match(require_shape(points), options, scaled(progress, 0.0, 0.9) if checking else progress)
         candidates = self.kept(found.candidates, region, laser_T_base, bounded)
         # the matcher decided which hypotheses are distinct; the verdict judges them as they are
@@ -199,7 +215,7 @@ class Localizer:
         if checking and candidates and not found.stopped:     # a stopped search is never a success anyway
             raw = RawVerdict(verdict.outcome, verdict.confidence, verdict.message,
                              candidates[0].laser_pose * laser_T_base)
-            found, verdict = verify(matcher.name, candidates, points, self.matcher('bnb'), check_options(
+            found, verdict = verify(matcher.name, candidates, points, tracker, check_options(
                 options, cfg.max_search_s - (time.perf_counter() - t0)), scaled(progress, 0.9, 1.0))
             candidates = self.kept(found.candidates, region, laser_T_base, bounded)
         hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in candidates]

@@ -27,7 +27,7 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from .localizer import Hypothesis, LocalizationResult
-from .matchers.bnb.verdict import explained_share, needed_lead
+from .matchers.base import Tracker
 from .outcome import Outcome
 from .scan import ScanPoints
 from .transform import Rigid2D, pose_correct
@@ -36,30 +36,30 @@ from .transform import Rigid2D, pose_correct
 FitFn = Callable[[Rigid2D], tuple[float, Rigid2D]]
 
 
-def pose_fitter(matcher, points: ScanPoints, base_T_laser: Rigid2D) -> FitFn:
+def pose_fitter(tracker: Tracker, points: ScanPoints, base_T_laser: Rigid2D) -> FitFn:
     """How well one scan fits at a robot pose, the one measure tracking and health use:
-    bnb's field score x (1 - share of beams through mapped walls), at the pose refined
+    the tracker's fit x (1 - share of beams through mapped walls), at the pose refined
     within about a cell (fit_at); with the refined base pose."""
     laser_T_base = base_T_laser.inverse()
 
     def fit(base: Rigid2D) -> tuple[float, Rigid2D]:
-        score, through, laser = matcher.fit_at(points, base * base_T_laser)
+        score, through, laser = tracker.fit_at(points, base * base_T_laser)
         return score * (1.0 - through), laser * laser_T_base
     return fit
 
 
 @dataclass(frozen=True)
 class MotionConfig:
-    lead: float = 0.05                   # a confident single-scan margin (bnb's) ...
+    lead: float = 0.05                   # a confident single-scan margin at a full fit ...
     lead_scans: float = 10.0             # ... this many scans' worth of it is the summed lead a winner needs
     min_travel_m: float = 0.5            # ... after the robot drove this far
     min_turn: float = math.radians(90)   # ... or turned this much
     keep: float = 0.8                    # hypotheses whose mean fit falls below keep x the best are dropped
 
     @staticmethod
-    def for_matcher(options) -> 'MotionConfig':
-        """With the lead a confident single-scan answer of bnb (its options) needs."""
-        return MotionConfig(lead=options.min_confidence * (1.0 - options.keep_ratio))
+    def for_tracker(tracker: Tracker) -> 'MotionConfig':
+        """With the lead a confident single-scan answer of `tracker` needs at a full fit."""
+        return MotionConfig(lead=tracker.lead_needed(1.0))
 
 
 @dataclass
@@ -129,24 +129,24 @@ def fuse_scans(scans: list[tuple[Rigid2D, ScanPoints]]) -> ScanPoints:
     return ScanPoints(points, max(reach, max(p.range_max for _, p in scans)), len(points), beams=False)
 
 
-def search_fused_view(localizer, seen: list[tuple[Rigid2D, ScanPoints]], base_T_laser: Rigid2D):
+def search_fused_view(localizer, tracker: Tracker, seen: list[tuple[Rigid2D, ScanPoints]], base_T_laser: Rigid2D):
     """The scans seen on the way (laser poses in the odometry frame, points), fused into
-    one view and searched over the whole map (None before two scans)."""
+    one view and searched over the whole map by the tracker (None before two scans)."""
     if len(seen) < 2:
         return None
-    return localizer.localize_points(fuse_scans(seen[::3] + seen[-1:]), FOLLOW_METHOD, base_T_laser=base_T_laser)
+    return localizer.localize_points(fuse_scans(seen[::3] + seen[-1:]), tracker.name, base_T_laser=base_T_laser)
 
 
-def close_places(fused, options) -> list[Rigid2D]:
+def close_places(fused, tracker: Tracker) -> list[Rigid2D]:
     """The fused view's best place and every other within the lead a confident answer needs."""
     if not fused.hypotheses:
         return []
     best = fused.hypotheses[0].score
-    need = needed_lead(explained_share(best), options)
+    need = tracker.lead_needed(best)
     return [h.pose for h in fused.hypotheses if h.score >= best * (1.0 - need)]
 
 
-def confirm(fused, options, candidate: Optional[Rigid2D] = None, beaten: Sequence[Rigid2D] = ()):
+def confirm(fused, tracker: Tracker, candidate: Optional[Rigid2D] = None, beaten: Sequence[Rigid2D] = ()):
     """The fused view's result when it confirms `candidate` (the leader of the followed
     hypotheses, when there is one), else None: it must be confident and agree with it. A
     leader alone is never enough: a hypothesis can slide along a featureless wall while it
@@ -167,9 +167,9 @@ def confirm(fused, options, candidate: Optional[Rigid2D] = None, beaten: Sequenc
     # explained view of a few scans (a real log's 1 m between scans) may rank a place first
     # that neither the view nor the sums can vouch for, the true one found by neither.
     if candidate is None or not beaten or fused.outcome != Outcome.AMBIGUOUS or \
-            explained_share(fused.hypotheses[0].score) < 1.0:
+            tracker.explained(fused.hypotheses[0].score) < 1.0:
         return None
-    close = close_places(fused, options)[1:]
+    close = close_places(fused, tracker)[1:]
     if not all(any(pose_correct(pose, b) for b in beaten) for pose in close):
         return None
     return dataclasses.replace(fused, outcome=Outcome.LOCALIZED, message=(
@@ -177,11 +177,6 @@ def confirm(fused, options, candidate: Optional[Rigid2D] = None, beaten: Sequenc
         f'while followed'))
 
 
-# Following uses bnb whatever method answered the single scan: the per-scan fit (fit_at,
-# a refinement within a cell on bnb's precomputed field) has no counterpart in the thesis
-# matchers, and `search_fused_view` searches the whole map about once a second while the
-# robot moves, which only bnb does in tens of milliseconds; the lead a winner needs is bnb's margin.
-FOLLOW_METHOD = 'bnb'
 SETTLE_PERIOD_S = 1.0     # scan time between two searches of the fused view (a search each: not every scan)
 
 
@@ -211,9 +206,9 @@ class HypothesisFollower:
     def __init__(self, result: LocalizationResult, localizer, base_T_laser: Rigid2D, start_odometry: Rigid2D,
                  start_stamp: float, config: Optional[MotionConfig] = None):
         self.result, self.localizer, self.base_T_laser = result, localizer, base_T_laser
-        self.matcher = localizer.matcher(FOLLOW_METHOD)
+        self.tracker = localizer.tracker()     # whatever method answered the single scan (see Localizer.tracker)
         self.resolver = MotionResolver([h.pose for h in result.hypotheses],
-                                       config or MotionConfig.for_matcher(self.matcher.options))
+                                       config or MotionConfig.for_tracker(self.tracker))
         self.odometry, self.start_stamp = start_odometry, start_stamp
         self.seen: list[tuple[Rigid2D, ScanPoints]] = []    # (laser pose in the odometry frame, points)
         self.checked = -math.inf
@@ -230,16 +225,16 @@ class HypothesisFollower:
         time). Whether a winner has settled."""
         motion, self.odometry, self.last = self.odometry.inverse() * obs.odometry, obs.odometry, obs
         self.seen.append((obs.odometry * self.base_T_laser, obs.points))
-        leader = self.resolver.update(motion, pose_fitter(self.matcher, obs.points, self.base_T_laser))
+        leader = self.resolver.update(motion, pose_fitter(self.tracker, obs.points, self.base_T_laser))
         if self.resolver.moved_enough() and obs.stamp - self.checked >= SETTLE_PERIOD_S:
             self.checked = obs.stamp
-            fused = search_fused_view(self.localizer, self.seen, self.base_T_laser)
+            fused = search_fused_view(self.localizer, self.tracker, self.seen, self.base_T_laser)
             if leader is not None:
                 built = len(self.seen) >= self.resolver.config.lead_scans
-                self.winner = confirm(fused, self.matcher.options, leader.pose,
+                self.winner = confirm(fused, self.tracker, leader.pose,
                                       [t.pose for t in self.resolver.tracks if t is not leader] if built else ())
             if self.winner is None and fused is not None:
-                self.adopt(close_places(fused, self.matcher.options))
+                self.adopt(close_places(fused, self.tracker))
         return self.winner is not None
 
     def adopt(self, places: list[Rigid2D]) -> None:
@@ -252,7 +247,7 @@ class HypothesisFollower:
         tracks = self.resolver.tracks
         laser_T_base = self.base_T_laser.inverse()
         bases = [laser * laser_T_base for laser, _ in self.seen]     # robot base, odometry frame, per scan
-        fits = [pose_fitter(self.matcher, points, self.base_T_laser) for _, points in self.seen]
+        fits = [pose_fitter(self.tracker, points, self.base_T_laser) for _, points in self.seen]
         for place in places:
             if any(pose_correct(place, t.pose) for t in tracks):
                 continue
@@ -281,7 +276,8 @@ class HypothesisFollower:
         r = self.resolver
         winner, how = self.winner, 'one place led and the scans seen, fused into one view, confirm it'
         if winner is None and search_fused:
-            winner = confirm(search_fused_view(self.localizer, self.seen, self.base_T_laser), self.matcher.options)
+            fused = search_fused_view(self.localizer, self.tracker, self.seen, self.base_T_laser)
+            winner = confirm(fused, self.tracker)
             how = 'the scans seen, fused into one view, match one place'
         # A followed hypothesis's score is its mean fit over the scans seen (pose_fitter's
         # 0..1 measure), not the matcher's score of the one scan: the message says so.

@@ -17,7 +17,7 @@ from rclpy.parameter import Parameter
 
 from ..core import limits
 from ..core.localizer import LocalizerConfig
-from ..core.matchers import BranchAndBoundOptions, method_names, resolve_method
+from ..core.matchers import TRACKER_METHOD, BranchAndBoundOptions, method_names, resolve_method
 from ..core.matchers.bnb.options import option_fields, option_range
 from ..core.mount import LaserMount, MountError
 from ..core.mount3d import Mount3D
@@ -157,7 +157,7 @@ def build_config(values: dict, mounts: dict | None = None) -> ServerConfig:
     except MountError as e:
         raise ConfigError(f'parameter laser_roll: {e}') from None
     try:
-        prepared = tuple(dict.fromkeys(resolve_method(m) for m in (v['method'], 'bnb', *v['methods'])))
+        prepared = tuple(dict.fromkeys(resolve_method(m) for m in (v['method'], TRACKER_METHOD, *v['methods'])))
     except ValueError as e:
         raise ConfigError(f'parameter method or methods: {e}') from None
     try:

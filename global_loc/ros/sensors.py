@@ -140,15 +140,15 @@ class SensorMounts:
         return LaserMount.from_mount3d(self.mount(primary, frame))
 
 
-def laser_fit(matcher, laser_mount: Callable, scan_msg, pose):
-    """bnb's fit of a primary-laser scan at a base pose (the health watch's); None when the
+def laser_fit(tracker, laser_mount: Callable, scan_msg, pose):
+    """The tracker's fit of a primary-laser scan at a base pose (the health watch's); None when the
     scan or its mounting cannot be used."""
     try:
         mount = laser_mount(scan_msg.header.frame_id)
         points = scan_to_points(mount.upright(scan_from_msg(scan_msg)))
     except ScanError:
         return None
-    return pose_fitter(matcher, points, mount.base_T_laser)(pose)[0]
+    return pose_fitter(tracker, points, mount.base_T_laser)(pose)[0]
 
 
 def _latest():

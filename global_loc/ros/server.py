@@ -53,7 +53,6 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability
 # /initialpose: reliable and volatile, as AMCL subscribes it (a transient-local pose would
 # reach no volatile subscriber that joins late anyway; the health watch retries instead).
 INITIALPOSE = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
-WATCH_METHOD = 'bnb'     # the fit the watch and the motion follower measure is bnb's field (core.motion.pose_fitter)
 
 
 class GlobalLocServer(LifecycleNode):
@@ -264,7 +263,7 @@ class GlobalLocServer(LifecycleNode):
     def fit_at(self, scan_msg, pose):
         """The watch's fit of a primary-laser scan at a base pose (None while no map is ready)."""
         localizer = self.maps.current().built
-        return None if localizer is None else laser_fit(localizer.matcher(WATCH_METHOD), self.laser_mount, scan_msg,
+        return None if localizer is None else laser_fit(localizer.tracker(), self.laser_mount, scan_msg,
                                                         pose)
 
     def laser_mount(self, frame: str) -> LaserMount:

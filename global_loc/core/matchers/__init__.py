@@ -4,7 +4,7 @@ from __future__ import annotations
 from typing import Optional
 
 from ..limits import check_build_budget
-from .base import Candidate, Match, Matcher, MatchOptions, MethodError
+from .base import Candidate, Match, Matcher, MatchOptions, MethodError, Tracker
 from .bnb import BranchAndBoundMatcher, BranchAndBoundOptions
 from .features import FeatureMatcher, make_detector, surf_available
 from .template import ccoeff_matcher, sqdiff_matcher
@@ -18,6 +18,12 @@ _FACTORIES = {
     'features_akaze': lambda m: FeatureMatcher(m, 'akaze'),
     'features_surf': lambda m: FeatureMatcher(m, 'surf'),
 }
+# The matcher that tracks (core.motion, the health watch) and checks a proposing matcher's
+# answer on the map (verify.py) when the configured one is not a Tracker. The thesis
+# matchers score images of a whole scan, not one scan at a given pose; tracking scores every
+# scan at every hypothesis and searches the whole map about once a second while the robot
+# moves, which bnb's precomputed field does in milliseconds; its verdict is exhaustive.
+TRACKER_METHOD = 'bnb'
 # 'features' is the thesis's choice where the build has it (SURF), ORB otherwise.
 ALIASES = {'features': lambda: 'features_surf' if surf_available() else 'features_orb'}
 
@@ -58,5 +64,5 @@ def make_matcher(name: str, occupancy_map, bnb_options: Optional[BranchAndBoundO
     return _FACTORIES[name](occupancy_map)
 
 
-__all__ = ['BranchAndBoundOptions', 'Candidate', 'Match', 'Matcher', 'MatchOptions', 'MethodError', 'make_matcher',
-           'method_names', 'resolve_method']
+__all__ = ['TRACKER_METHOD', 'BranchAndBoundOptions', 'Candidate', 'Match', 'Matcher', 'MatchOptions', 'MethodError',
+           'Tracker', 'make_matcher', 'method_names', 'resolve_method']

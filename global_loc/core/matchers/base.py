@@ -8,13 +8,17 @@ if it did, and its statistics. It reports progress through `progress(fraction,
 best_score)`, which may raise `CanceledError` to stop it early. `judge` turns exactly those
 hypotheses into a Verdict; it reads nothing else, so one matcher serves any number of
 threads and callers, and the caller only presents what both returned.
+
+A matcher that can also score a scan at a given pose is a `Tracker`: following hypotheses
+with motion, the health watch and the map check of another matcher's answer need exactly
+that, and nothing else of it.
 """
 from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -176,3 +180,33 @@ class Matcher(ABC):
     def match(self, points: ScanPoints, options: MatchOptions, progress: Optional[ProgressFn] = None) -> Match:
         """The distinct hypotheses for the laser pose, best first (possibly none), why the
         search stopped short (if it did) and its statistics."""
+
+
+@runtime_checkable
+class Tracker(Protocol):
+    """What following hypotheses with motion (core.motion), the health watch and the map
+    check of a proposing matcher (verify.py) need of a matcher, besides `match`, `judge`
+    and `distinct`: the fit at a pose, and the lead rule on that fit's scale."""
+    name: str
+    distinct_m: float
+    distinct_angle: float
+
+    def fit_at(self, points: ScanPoints, laser_pose: Rigid2D) -> tuple[float, float, Rigid2D]:
+        """How well the map explains the scan at a laser pose, refined within about a cell:
+        (fit, share of beams through mapped walls, the refined pose)."""
+
+    def explained(self, score: float) -> float:
+        """The share of the scan, 0..1, the map explains at a hypothesis of this score."""
+
+    def lead_needed(self, score: float) -> float:
+        """The lead over every other place, relative to the best, a confident answer needs
+        when the best scores `score` (lead_needed(1.0): at a full fit)."""
+
+    def match(self, points: ScanPoints, options: MatchOptions, progress: Optional[ProgressFn] = None) -> Match:
+        ...
+
+    def judge(self, candidates: list[Candidate], stopped: str = '', settled: str = '') -> Verdict:
+        ...
+
+    def distinct(self, candidates: list[Candidate]) -> list[Candidate]:
+        ...

@@ -17,7 +17,7 @@ from typing import Optional
 from ..outcome import Outcome
 from ..scan import ScanPoints
 from ..transform import Rigid2D
-from .base import Candidate, Match, MatchOptions, ProgressFn, Verdict, apart
+from .base import Candidate, Match, MatchOptions, ProgressFn, Tracker, Verdict, apart
 
 
 @dataclass(frozen=True)
@@ -33,7 +33,7 @@ class RawVerdict:
         return self.outcome == Outcome.LOCALIZED
 
 
-def refined_on_map(checker, candidates: list[Candidate], points: ScanPoints) -> list[Candidate]:
+def refined_on_map(checker: Tracker, candidates: list[Candidate], points: ScanPoints) -> list[Candidate]:
     """Each proposal refined within about a cell and scored as bnb scores its own peaks
     (field score x (1 - see-through share)), in the proposer's order."""
     out = []
@@ -43,10 +43,10 @@ def refined_on_map(checker, candidates: list[Candidate], points: ScanPoints) -> 
     return out
 
 
-def verify(proposer: str, proposals: list[Candidate], points: ScanPoints, checker, options: MatchOptions,
+def verify(proposer: str, proposals: list[Candidate], points: ScanPoints, checker: Tracker, options: MatchOptions,
            progress: Optional[ProgressFn] = None) -> tuple[Match, Verdict]:
     """The checked hypotheses (the proposals refined and bnb's rivals, distinct, best
-    first) and the one verdict on them. `checker`: the map's bnb matcher."""
+    first) and the one verdict on them. `checker`: the map's Tracker (Localizer.tracker)."""
     refined = refined_on_map(checker, proposals, points)
     rivals = checker.match(points, options, progress)
     union = checker.distinct(sorted(refined + rivals.candidates, key=lambda c: -c.score))

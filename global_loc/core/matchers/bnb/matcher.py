@@ -40,7 +40,7 @@ from .options import BranchAndBoundOptions
 from .refine import bin_maxima, landscape_covariance, refine
 from .refine import warm_up as warm_up_refine
 from .search import SearchStats, SettledFn, ThreadedSearch, search_threads
-from .verdict import judge, unscored_could_be_confident
+from .verdict import explained_share, judge, needed_lead, unscored_could_be_confident
 
 
 class SettledJudgment(NamedTuple):
@@ -208,6 +208,14 @@ class BranchAndBoundMatcher(Matcher):
         through = see_through_fractions(self.stack.occupied, np.array([[u, v, yaw]]), points, self.map.resolution,
                                         self.options)[0]
         return float(score), float(through), frame.pixel_pose_to_world(u, v, yaw)
+
+    def explained(self, score: float) -> float:
+        """See base.Tracker (verdict.explained_share)."""
+        return explained_share(score)
+
+    def lead_needed(self, score: float) -> float:
+        """See base.Tracker (verdict.needed_lead)."""
+        return needed_lead(explained_share(score), self.options)
 
     def leaf_angles(self, pts: np.ndarray) -> int:
         """How many leaf headings the search has for these (prepared) points: steps of at
