@@ -181,9 +181,9 @@ def test_goal_fields_give_a_result_or_a_clear_error(method, angle_step, center, 
         assert str(e)
         return
     assert_finite_result(result)
-    if region.bounded:     # the region as searched: a tighter one is widened to the search's resolution
+    if region.bounded:     # searched wider when tighter than the search's resolution; answered inside
         assert result.region.radius_m >= region.radius_m and result.region.yaw_tolerance >= region.yaw_tolerance
-        assert all(result.region.contains(h.pose) for h in result.hypotheses)
+        assert all(region.contains(h.pose) for h in result.hypotheses)
 
 
 @pytest.mark.parametrize('step', [-1.0, math.nan, math.inf, 181.0])   # 0: the default step

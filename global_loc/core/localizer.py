@@ -6,6 +6,7 @@ use. The ROS server, the CLI and the benchmark all call `Localizer.localize`.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -52,6 +53,12 @@ class LocalizerConfig:
     verify: bool = True
 
 
+# How far, in the search's resolution (a cell, a leaf heading step), a refinement may move a
+# candidate out of the prior as searched and still be moved onto the prior (Localizer.kept):
+# the refinement starts at a leaf inside it and wanders a few (0.47 deg, 2.3 steps, measured).
+REFINE_REACH = 4.0
+
+
 class NonFinitePose(ValueError):
     """A result would carry a pose with a NaN or infinite coordinate: refused at the last step,
     whatever path made it (a bad mounting, a degenerate match)."""
@@ -85,7 +92,8 @@ class LocalizationResult:
     time_s: float = 0.0
     dropped: dict = field(default_factory=dict)
     search_stats: Any = None   # what the matcher's search did (bnb: SearchStats), for diagnostics
-    region: Optional[SearchRegion] = None   # the search prior as searched (widened to the search's resolution)
+    region: Optional[SearchRegion] = None   # the search prior as searched (widened to the search's resolution;
+                                            # the poses lie in the prior as given)
     raw: Optional[RawVerdict] = None        # a checked thesis matcher's own verdict (its pose: the base's)
 
     def __setattr__(self, name, value):
@@ -164,11 +172,26 @@ class Localizer:
         return matcher if isinstance(matcher, Tracker) else self.matcher(TRACKER_METHOD)
 
     @staticmethod
-    def kept(candidates: list, region, laser_T_base: Rigid2D, bounded: bool) -> list:
+    def kept(candidates: list, prior: Optional[SearchRegion], near: Optional[SearchRegion],
+             laser_T_base: Rigid2D) -> list:
         """The candidates with a finite pose and score (whatever a matcher made of a
-        degenerate input), inside the search prior when there is one."""
+        degenerate input), in the search prior when there is one. A prior is a constraint:
+        a candidate outside it but in `near` (the prior as searched, widened by how far a
+        refinement wanders) is moved onto the prior's nearest pose - a heading prior tighter
+        than the search's resolution, or than the refinement's wander, would otherwise lose
+        the very place it names; one farther out (a thesis matcher's peak elsewhere) is dropped."""
         out = [c for c in candidates if all(map(math.isfinite, (*c.laser_pose.as_tuple(), c.score)))]
-        return [c for c in out if region.contains(c.laser_pose * laser_T_base)] if bounded else out
+        if prior is None:
+            return out
+        base_T_laser = laser_T_base.inverse()
+        kept = []
+        for c in out:
+            base = c.laser_pose * laser_T_base
+            if prior.contains(base):
+                kept.append(c)
+            elif near.contains(base):
+                kept.append(dataclasses.replace(c, laser_pose=prior.nearest(base) * base_T_laser))
+        return kept
 
     def localize(self, scan: Scan, method: Optional[str] = None, angle_step_deg: Optional[float] = None,
                  progress: Optional[ProgressFn] = None, base_T_laser: Optional[Rigid2D] = None,
@@ -193,13 +216,16 @@ class Localizer:
         if not base_T_laser.is_finite():
             raise MountError(f'the laser mounting on the base must be finite, got {base_T_laser}')
         laser_T_base = base_T_laser.inverse()
-        bounded = region is not None and region.bounded
+        prior = region if region is not None and region.bounded else None    # every answer lies in it
         step = check_angle_step(angle_step_deg or cfg.angle_step_deg)
+        searched = near = None
         widened = ''
-        if bounded:    # a prior tighter than the search's resolution holds no pose it returns: widen it, said
-            region, widened = region.widened_to(*matcher.search_resolution(points, step))
+        if prior is not None:   # a prior tighter than the search's resolution holds no leaf: search wider, said
+            resolution = matcher.search_resolution(points, step)
+            searched, widened = prior.widened_to(*resolution)
+            near = searched.widened_by(REFINE_REACH * resolution[0], REFINE_REACH * resolution[1])
         options = MatchOptions(angle_step_deg=step, closing_kernel=cfg.closing_kernel,
-                               region=region.for_laser(base_T_laser) if bounded else None,
+                               region=searched.for_laser(base_T_laser) if searched else None,
                                max_search_s=cfg.max_search_s)
         if not self._has_obstacles:
             return LocalizationResult(Outcome.NO_MATCH, f'the map {self.map.source} has no obstacles (no occupied '
@@ -208,7 +234,7 @@ class Localizer:
         tracker = self.tracker(matcher.name)
         checking = cfg.verify and matcher is not tracker
         found = matcher.match(require_shape(points), options, scaled(progress, 0.0, 0.9) if checking else progress)
-        candidates = self.kept(found.candidates, region, laser_T_base, bounded)
+        candidates = self.kept(found.candidates, prior, near, laser_T_base)
         # the matcher decided which hypotheses are distinct; the verdict judges them as they are
         verdict = matcher.judge(candidates, found.stopped, found.settled)
         raw = None
@@ -217,13 +243,13 @@ class Localizer:
                              candidates[0].laser_pose * laser_T_base)
             found, verdict = verify(matcher.name, candidates, points, tracker, check_options(
                 options, cfg.max_search_s - (time.perf_counter() - t0)), scaled(progress, 0.9, 1.0))
-            candidates = self.kept(found.candidates, region, laser_T_base, bounded)
+            candidates = self.kept(found.candidates, prior, near, laser_T_base)
         hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in candidates]
         message = f'{verdict.message}; {widened}' if widened else verdict.message
         result = LocalizationResult(verdict.outcome, message, matcher.name, confidence=verdict.confidence,
                                     hypotheses=hyps, time_s=time.perf_counter() - t0, dropped=points.dropped,
                                     covariance=np.diag([cfg.covariance_xy, cfg.covariance_xy, cfg.covariance_yaw]),
-                                    search_stats=found.stats, region=region if bounded else None, raw=raw)
+                                    search_stats=found.stats, region=searched, raw=raw)
         if hyps:
             result.pose, result.score = hyps[0].pose, hyps[0].score
             if candidates[0].covariance is not None:

@@ -50,7 +50,33 @@ class SearchRegion:
             tolerance = yaw_tolerance
         if not said:
             return self, ''
-        return SearchRegion(self.center, radius, tolerance), ' and '.join(said) + ", the search's resolution"
+        said = ' and '.join(said) + ", the search's resolution, for the search; the answer lies in the prior"
+        return SearchRegion(self.center, radius, tolerance), said
+
+    def widened_by(self, metres: float, radians: float) -> 'SearchRegion':
+        """This region with `metres` more radius and `radians` more heading window (each
+        only where it is bounded)."""
+        radius = self.radius_m + metres if self.radius_m > 0 else 0.0
+        tolerance = min(self.yaw_tolerance + radians, math.pi) if 0 < self.yaw_tolerance < math.pi else \
+            self.yaw_tolerance
+        return SearchRegion(self.center, radius, tolerance)
+
+    def nearest(self, pose: Rigid2D) -> Rigid2D:
+        """The pose of this region nearest `pose`: its position moved onto the disc, its
+        heading into the window (`pose` itself when the region contains it)."""
+        if self.contains(pose):
+            return pose
+        x, y, yaw = pose.x, pose.y, pose.yaw
+        dx, dy = x - self.center.x, y - self.center.y
+        distance = math.hypot(dx, dy)
+        inside = 1.0 - 1e-9     # onto the edge, and not past it by a rounding
+        if 0 < self.radius_m < distance:
+            x, y = (self.center.x + dx * inside * self.radius_m / distance,
+                    self.center.y + dy * inside * self.radius_m / distance)
+        off = normalize_angle(yaw - self.center.yaw)
+        if 0 < self.yaw_tolerance < abs(off):
+            yaw = normalize_angle(self.center.yaw + math.copysign(inside * self.yaw_tolerance, off))
+        return Rigid2D(x, y, yaw)
 
     def for_laser(self, base_T_laser: Rigid2D) -> 'SearchRegion':
         """The region the laser lies in when the base lies in this one: the disc widened
