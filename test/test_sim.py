@@ -223,3 +223,17 @@ def test_sim_node_publishes_the_rear_laser_and_the_lidar_when_enabled(tmp_path):
     finally:
         recorder.close()
         plain.stop()
+
+
+def test_the_shipped_sim_params_give_the_simulators_own_mountings():
+    """config/sim.yaml is what tells the server (without tf2) where the simulator's sensors sit."""
+    import yaml
+
+    from global_loc.core.mount3d import Mount3D
+    from global_loc.core.paths import sim_params_file
+    from global_loc.sim.simulator import BASE_T_LASER, LASER_HEIGHT, REAR_LASER_MOUNT
+    with open(sim_params_file()) as f:
+        sensors = yaml.safe_load(f)['global_loc_server']['ros__parameters']['sensors']
+    mounts = {name: Mount3D.from_values(value['mount']) for name, value in sensors.items()}
+    assert mounts == {'scan': Mount3D.planar(BASE_T_LASER, LASER_HEIGHT), 'scan_rear': REAR_LASER_MOUNT,
+                      'points': LIDAR_MOUNT}

@@ -29,7 +29,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan, PointCloud2
 
 from ..core.map_io import MapError, load_map_yaml
-from ..core.paths import default_map_yaml
+from ..core.paths import default_map_yaml, sim_params_file
 from ..core.transform import Rigid2D, format_pose
 from ..sim.laser import LaserConfig
 from ..sim.lidar3d import Lidar3DConfig
@@ -87,7 +87,8 @@ class SimNode(Node):
                                f'{format_pose(start)}, {clutter} clutter objects, '
                                f'{laser.num_beams} beams over {laser.fov_deg} deg'
                                f'{f", rear laser on /scan_rear over {rear.fov_deg} deg" if rear else ""}'
-                               f'{f", 3D lidar on /points at {lidar.rate_hz} Hz" if lidar else ""}')
+                               f'{f", 3D lidar on /points at {lidar.rate_hz} Hz" if lidar else ""}; '
+                               f'the server finds these sensors\' mountings in {sim_params_file()} (--params-file)')
 
     def close(self) -> None:
         """Disconnect pybullet (run_node calls it on shutdown)."""
