@@ -237,7 +237,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help='with --bag or --carmen: when a start scan is ambiguous, follow its hypotheses over the '
                           'next scans with the recorded odometry, as the server resolves by motion')
     loc.add_argument('--follow-s', type=float, default=30.0,
-                     help='with --follow: seconds of recording to follow for at most (default 30)')
+                     help='with --follow: seconds of recording to follow for at most (default 30), and at most '
+                          '1 m/s x that far and 40 Hz x that many scans (stamps may repeat)')
     loc.add_argument('--odom-topic', default='/odom', help='with --bag --follow, or several sensors: the '
                                                            'nav_msgs/Odometry topic (several sensors: used when '
                                                            'present, to move each reading to the view\'s stamp)')

@@ -11,7 +11,9 @@ line's pose.
 """
 from __future__ import annotations
 
+import itertools
 import math
+import sys
 import time
 from dataclasses import dataclass
 from typing import Optional
@@ -33,6 +35,35 @@ class Frame:
     scan: Scan
     odometry: Optional[Rigid2D]      # base in the odometry frame at the scan's stamp; None: no odometry then
     truth: Optional[Rigid2D] = None  # base in the map frame, when the recording knows it (CARMEN)
+    where: str = ''                  # where in the recording, for messages (a CARMEN log's line)
+
+
+# A follow is bounded by distance and scan count as well as by the recording's stamps, which
+# may repeat or go back (a CARMEN log whose stamps wrap to one value): --follow-s seconds at
+# most at an indoor robot's top speed, and at a fast 2D laser's rate.
+MAX_SPEED_MPS = 1.0
+MAX_SCAN_RATE_HZ = 40.0
+
+
+@dataclass(frozen=True)
+class FollowBounds:
+    seconds: float           # of the recording's stamps after the start scan's
+    metres: float            # driven, by the odometry
+    scans: int               # observations
+
+    @staticmethod
+    def for_seconds(seconds: float) -> 'FollowBounds':
+        return FollowBounds(seconds, MAX_SPEED_MPS * seconds, math.ceil(MAX_SCAN_RATE_HZ * seconds))
+
+
+def stamps_not_advancing(frames: list[Frame]) -> Optional[str]:
+    """Where the recording's stamps first repeat or go back, said; None when they always advance."""
+    bad = [(a, b) for a, b in itertools.pairwise(frames) if b.scan.stamp <= a.scan.stamp]
+    if not bad:
+        return None
+    a, b = bad[0]
+    return (f'the scans\' stamps do not always advance ({len(bad)} time(s)); first at scan {b.index}{b.where}: '
+            f'{b.scan.stamp:.6f} after {a.scan.stamp:.6f}. Following is also bounded by distance and scan count')
 
 
 def read_odometry(path: str, topic: str) -> list[tuple[float, Rigid2D]]:
@@ -78,22 +109,33 @@ def carmen_frames(path: str) -> list[Frame]:
     """Every FLASER scan of a CARMEN log with its raw odometry and corrected pose (laser poses:
     the base is the laser)."""
     from .bench.carmen import read_flaser
-    return [Frame(i, r.scan, r.odometry, r.pose) for i, r in enumerate(read_flaser(path))]
+    return [Frame(i, r.scan, r.odometry, r.pose, f' (line {r.line})') for i, r in enumerate(read_flaser(path))]
 
 
-def observations(frames: list[Frame], start: int, follow_s: float, end: Optional[int] = None):
-    """The frames after `start` (up to `end`) within follow_s of its stamp, as observations;
-    unusable scans and scans without odometry skipped (the odometry spans the gap)."""
-    t0 = frames[start].scan.stamp
+def observations(frames: list[Frame], start: int, bounds: FollowBounds, end: Optional[int] = None,
+                 ended: Optional[list] = None):
+    """The frames after `start` (up to `end`) within `bounds` of it, as observations;
+    unusable scans and scans without odometry skipped (the odometry spans the gap). Which
+    bound ended them, if one did, is appended to `ended` ('time', 'distance', 'scans')."""
+    t0, last, travelled, count = frames[start].scan.stamp, frames[start].odometry, 0.0, 0
     for frame in frames[start + 1:end]:
-        if frame.scan.stamp - t0 > follow_s:
-            return
-        if frame.odometry is None:
+        if frame.scan.stamp - t0 > bounds.seconds:
+            reason = 'time'
+        elif frame.odometry is None:
             continue
+        else:
+            travelled += math.hypot(*(last.inverse() * frame.odometry).as_tuple()[:2]) if last is not None else 0.0
+            last = frame.odometry
+            reason = 'distance' if travelled > bounds.metres else 'scans' if count >= bounds.scans else ''
+        if reason:
+            if ended is not None:
+                ended.append(reason)
+            return
         try:
             points = scan_to_points(frame.scan)
         except ScanError:
             continue
+        count += 1
         yield Observation(points, frame.odometry, frame.scan.stamp, frame)
 
 
@@ -110,7 +152,7 @@ def result_fields(result: LocalizationResult, truth: Optional[Rigid2D]) -> dict:
             'hypotheses': len(result.hypotheses), **pose_fields(result.pose, truth)}
 
 
-def follow_start(localizer, frames: list[Frame], start: int, follow_s: float, base_T_laser: Rigid2D,
+def follow_start(localizer, frames: list[Frame], start: int, bounds: FollowBounds, base_T_laser: Rigid2D,
                  method: Optional[str] = None, end: Optional[int] = None) -> dict:
     """One start scan localized and, when ambiguous, followed: its output line as a dict."""
     t0 = time.perf_counter()
@@ -127,12 +169,14 @@ def follow_start(localizer, frames: list[Frame], start: int, follow_s: float, ba
     settled = False
     if followed:
         follower = HypothesisFollower(single, localizer, base_T_laser, frame.odometry, frame.scan.stamp)
-        follower.follow(observations(frames, start, follow_s, end))
+        ended = []
+        settled_early = follower.follow(observations(frames, start, bounds, end, ended))
         outcome = follower.finish()
         final, settled = outcome.result, outcome.settled
         at = frame if outcome.last is None else outcome.last.source
         moved = {'distance_m': round(outcome.travelled_m, 3), 'turn_deg': round(math.degrees(outcome.turned_rad), 1),
-                 'scans': outcome.scans, 'follow_s': round(outcome.elapsed_s, 3)}
+                 'scans': outcome.scans, 'follow_s': round(outcome.elapsed_s, 3),
+                 'ended': 'settled' if settled_early else ended[0] if ended else 'recording'}
     elif single.outcome == Outcome.AMBIGUOUS:
         out['error'] = 'no odometry at the start scan: not followed'
     return {**out, 'followed': followed, 'settled': settled, **result_fields(final, at.truth),
@@ -176,7 +220,11 @@ def follow_main(args, localizer, base_T_laser: Optional[Rigid2D] = None) -> int:
     else:
         raise ValueError('--follow needs a recording with odometry: --bag or --carmen')
     method = localizer.matcher(args.method).name
+    problem = stamps_not_advancing(frames)
+    if problem:
+        print(f'warning: {problem}', file=sys.stderr, flush=True)
+    bounds = FollowBounds.for_seconds(args.follow_s)
     for start in start_indices(frames, args.every):
-        row = follow_start(localizer, frames, start, args.follow_s, base_T_laser or Rigid2D(), args.method)
+        row = follow_start(localizer, frames, start, bounds, base_T_laser or Rigid2D(), args.method)
         print(json.dumps({'method': method, **row}), flush=True)
     return 0

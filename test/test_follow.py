@@ -4,6 +4,7 @@ gives its wheel odometry; twin aisle ends settle, a four-fold symmetric room doe
 and the fused view is searched by scan time, so the same observations give the same
 answer however fast they come. Offline, `localize --follow` does the same on a bag written
 here and on a shared CARMEN log."""
+import dataclasses
 import itertools
 import json
 import math
@@ -252,3 +253,50 @@ def test_follow_suite_rows_and_table_on_a_real_log():
     assert all(r['followed'] == (r['single_outcome'] == 'ambiguous') for r in rows)
     table = '\n'.join(follow_section(rows))
     assert '| aces | 6 |' in table
+
+
+def test_a_follow_is_bounded_by_distance_and_scans_when_stamps_stop_advancing():
+    """Stamps that stop advancing (a real log's wrap to one value) end no time window: the
+    distance driven and the scan count bound it, and the bound that ended it is said."""
+    from global_loc.core.scan import Scan
+    from global_loc.offline_follow import FollowBounds, Frame, observations, stamps_not_advancing
+    scan = Scan(-math.pi / 2, math.radians(1.0), 0.0, 8.0, np.full(181, 2.0), 0.0)
+    frames = [Frame(i, dataclasses.replace(scan, stamp=min(i, 3) * 0.1), Rigid2D(0.1 * i, 0.0, 0.0),
+                    where=f' (line {i + 1})') for i in range(400)]
+    assert stamps_not_advancing(frames).startswith("the scans' stamps do not always advance (396 time(s)); first "
+                                                   "at scan 4 (line 5): 0.300000 after 0.300000")
+    ended = []
+    seen = list(observations(frames, 0, FollowBounds.for_seconds(5.0), ended=ended))
+    assert ended == ['distance'] and len(seen) == 50          # 5 m at 1 m/s, 0.1 m a scan
+    ended = []
+    seen = list(observations(frames, 0, FollowBounds(5.0, 100.0, 30), ended=ended))
+    assert ended == ['scans'] and len(seen) == 30
+    ended = []
+    assert len(list(observations(frames, 0, FollowBounds(5.0, 100.0, 1000), ended=ended))) == 399 and ended == []
+    assert stamps_not_advancing(frames[:4]) is None
+
+
+@pytest.mark.skipif(not os.path.exists(ACES), reason=f'shared CARMEN logs not found ({ACES})')
+def test_follow_on_a_log_whose_stamps_stop_advancing_warns_and_ends_by_distance(tmp_path):
+    """ACES with every stamp after the 20th scan set to one value: before, a follow ran to the
+    end of the log (hundreds of metres) and called that its window."""
+    import gzip
+    lines, scans = [], 0
+    with gzip.open(ACES, 'rt') as f:
+        for line in f.read().splitlines():
+            if line.startswith('FLASER '):
+                scans += 1
+                if scans > 20:
+                    parts = line.split()
+                    parts[8 + int(parts[1])] = parts[-1] = '1000.0'      # ipc and logger timestamps
+                    line = ' '.join(parts)
+            lines.append(line)
+    log = tmp_path / 'wrapped.log'
+    log.write_text('\n'.join(lines) + '\n')
+    out, rows = run_follow('--carmen', str(log), '--follow', '--every', '180', '--follow-s', '60')
+    assert out.returncode == 0, out.stderr
+    assert "warning: the scans' stamps do not always advance" in out.stderr and 'first at scan 21 (line 414)' in \
+        out.stderr, out.stderr
+    followed = [r for r in rows if r['followed']]
+    assert followed, rows
+    assert all(r['ended'] in ('settled', 'distance', 'scans') and r['distance_m'] <= 61.0 for r in followed), followed

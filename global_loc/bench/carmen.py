@@ -31,6 +31,7 @@ class LaserRecord:
     pose: Rigid2D          # corrected laser pose
     timestamp: float
     odometry: Rigid2D = field(default_factory=Rigid2D)   # laser pose by the raw odometry alone (its own frame)
+    line: int = 0          # its line in the log file, from 1
 
 
 def read_flaser(path: str) -> list[LaserRecord]:
@@ -38,7 +39,7 @@ def read_flaser(path: str) -> list[LaserRecord]:
     opener = gzip.open if path.endswith('.gz') else open
     raw, odom = [], None            # odom: the last ODOM pose read
     with opener(path, 'rt') as f:
-        for line in f:
+        for number, line in enumerate(f, 1):
             if line.startswith('ODOM '):
                 odom = Rigid2D(*(float(v) for v in line.split()[1:4]))
             if not line.startswith('FLASER '):
@@ -47,14 +48,14 @@ def read_flaser(path: str) -> list[LaserRecord]:
             n = int(parts[1])
             ranges = np.array(parts[2:2 + n], dtype=float)
             x, y, theta = (float(v) for v in parts[2 + n:5 + n])
-            raw.append((ranges, Rigid2D(x, y, theta), float(parts[8 + n]), odom))
+            raw.append((ranges, Rigid2D(x, y, theta), float(parts[8 + n]), odom, number))
             odom = None
     if not raw:
         raise ValueError(f'{path}: no FLASER records')
-    max_reading = max(float(r.max()) for r, _, _, _ in raw)
+    max_reading = max(float(r[0].max()) for r in raw)
     range_max = 0.99 * max_reading            # at or above: no return (dropped by scan_to_points)
     records = []
-    for ranges, pose, stamp, odom in raw:
+    for ranges, pose, stamp, odom, number in raw:
         n = len(ranges)
         increment = math.radians(1.0) if n <= 181 else math.radians(0.5)
         odometry = Rigid2D()
@@ -62,7 +63,7 @@ def read_flaser(path: str) -> list[LaserRecord]:
             previous = records[-1]
             odometry = previous.odometry * (previous.pose.inverse() * odom if odom is not None else Rigid2D())
         records.append(LaserRecord(Scan(-math.pi / 2, increment, 0.0, range_max, ranges, stamp), pose, stamp,
-                                   odometry))
+                                   odometry, number))
     return records
 
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..core.localizer import Localizer
 from ..core.transform import CORRECT_XY_M, CORRECT_YAW_DEG, Rigid2D
-from ..offline_follow import Frame, follow_start
+from ..offline_follow import FollowBounds, Frame, follow_start
 from .carmen import GridCounts, LogGrid, explained_fraction, read_flaser
 from .tables import group, pct, secs
 
@@ -45,7 +45,7 @@ def log_rows(log: str, path: str, starts: int, seed: int, follow_s: float) -> li
         pose = records[i].pose
         if not m.is_free_at([[pose.x, pose.y]])[0] or explained_fraction(m, records[i]) < MIN_EXPLAINED:
             continue
-        line = follow_start(Localizer(m), frames, int(i), follow_s, Rigid2D(), 'bnb')
+        line = follow_start(Localizer(m), frames, int(i), FollowBounds.for_seconds(follow_s), Rigid2D(), 'bnb')
         rows.append({'suite': 'follow', 'log': log, 'index': line['index'],
                      'single_outcome': line['single']['outcome'], 'single_ok': right(line['single']),
                      'followed': line['followed'], 'settled': line['settled'], 'outcome': line['outcome'],
