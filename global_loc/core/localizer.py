@@ -26,6 +26,7 @@ from .matchers import (
     resolve_method,
 )
 from .matchers.base import ProgressFn
+from .matchers.mirror import mirror_verdict
 from .matchers.verify import RawVerdict, check_options, scaled, verify
 from .mount import MountError
 from .outcome import Outcome
@@ -51,6 +52,9 @@ class LocalizerConfig:
     # Judge a thesis matcher's hypotheses with bnb's verdict and check the rest of the map
     # for a rival (matchers/verify.py); False: its own verdict, as the thesis reported it.
     verify: bool = True
+    # A confident answer whose scan's mirror image fits the map better is not a success (the
+    # beams read the wrong way round: matchers/mirror.py). Off: the thesis's single search.
+    mirror_check: bool = True
 
 
 # How far, in the search's resolution (a cell, a leaf heading step), a refinement may move a
@@ -204,6 +208,35 @@ class Localizer:
         return self.localize_points(scan_to_points(scan), method, angle_step_deg, progress, base_T_laser, t0,
                                     region)
 
+    def judged(self, matcher, points: ScanPoints, options: MatchOptions, progress: Optional[ProgressFn], t0: float,
+               keep: tuple) -> tuple:
+        """The matcher's search, its hypotheses kept in the prior (`keep`: the prior, the
+        prior as searched widened by the refinement's reach, laser_T_base; see `kept`) and
+        the one verdict on them: a thesis matcher's hypotheses checked on the map by the
+        tracker (matchers/verify.py, its own verdict kept as the raw one), and a confident
+        answer's mirror image checked (matchers/mirror.py). (found, candidates, verdict, raw)."""
+        cfg = self.config
+        tracker = self.tracker(matcher.name)
+        checking = cfg.verify and matcher is not tracker
+        found = matcher.match(points, options, scaled(progress, 0.0, 0.9) if checking else progress)
+        candidates = self.kept(found.candidates, *keep)
+        # the matcher decided which hypotheses are distinct; the verdict judges them as they are
+        verdict = matcher.judge(candidates, found.stopped, found.settled)
+        raw = None
+        if checking and candidates and not found.stopped:     # a stopped search is never a success anyway
+            raw = RawVerdict(verdict.outcome, verdict.confidence, verdict.message,
+                             candidates[0].laser_pose * keep[2])
+            found, verdict = verify(matcher.name, candidates, points, tracker, check_options(
+                options, cfg.max_search_s - (time.perf_counter() - t0)), scaled(progress, 0.9, 1.0))
+            candidates = self.kept(found.candidates, *keep)
+        scored_by_tracker = matcher is tracker or raw is not None
+        if verdict.success and cfg.mirror_check and points.beams and scored_by_tracker:
+            unbounded = dataclasses.replace(options, region=None)      # the mirror image may fit anywhere
+            mirror = mirror_verdict(tracker, points, candidates[0], check_options(
+                unbounded, cfg.max_search_s - (time.perf_counter() - t0)), scaled(progress, 1.0, 1.0))
+            verdict = mirror or verdict
+        return found, candidates, verdict, raw
+
     def localize_points(self, points: ScanPoints, method: Optional[str] = None,
                         angle_step_deg: Optional[float] = None, progress: Optional[ProgressFn] = None,
                         base_T_laser: Optional[Rigid2D] = None, t0: Optional[float] = None,
@@ -231,19 +264,8 @@ class Localizer:
             return LocalizationResult(Outcome.NO_MATCH, f'the map {self.map.source} has no obstacles (no occupied '
                                                         f'cell) to match a scan against', matcher.name,
                                       time_s=time.perf_counter() - t0, dropped=points.dropped)
-        tracker = self.tracker(matcher.name)
-        checking = cfg.verify and matcher is not tracker
-        found = matcher.match(require_shape(points), options, scaled(progress, 0.0, 0.9) if checking else progress)
-        candidates = self.kept(found.candidates, prior, near, laser_T_base)
-        # the matcher decided which hypotheses are distinct; the verdict judges them as they are
-        verdict = matcher.judge(candidates, found.stopped, found.settled)
-        raw = None
-        if checking and candidates and not found.stopped:     # a stopped search is never a success anyway
-            raw = RawVerdict(verdict.outcome, verdict.confidence, verdict.message,
-                             candidates[0].laser_pose * laser_T_base)
-            found, verdict = verify(matcher.name, candidates, points, tracker, check_options(
-                options, cfg.max_search_s - (time.perf_counter() - t0)), scaled(progress, 0.9, 1.0))
-            candidates = self.kept(found.candidates, prior, near, laser_T_base)
+        found, candidates, verdict, raw = self.judged(matcher, require_shape(points), options, progress, t0,
+                                                      (prior, near, laser_T_base))
         hyps = [Hypothesis(c.laser_pose * laser_T_base, c.score) for c in candidates]
         message = f'{verdict.message}; {widened}' if widened else verdict.message
         result = LocalizationResult(verdict.outcome, message, matcher.name, confidence=verdict.confidence,

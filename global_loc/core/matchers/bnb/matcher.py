@@ -138,7 +138,8 @@ class BranchAndBoundMatcher(Matcher):
         bounds = node_bounds(self.stack.planes, tables, tu, tv, ta, top)
         run = self.searcher.run(self.stack.planes, tables, self.stack.free, space,
                                 np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, opt.max_nodes, progress,
-                                deadline, self.settled_check(pts, d0, points))
+                                deadline, self.settled_check(pts, d0, points),
+                                int(options.incumbent * 255 * len(pts)))
         search_s = time.perf_counter() - search_start
         leaves, expansions = run.leaves, int(run.per_level.sum())
         scores = leaves[:, 3] / (255.0 * len(pts))

@@ -80,7 +80,7 @@ class ThreadedSearch:
 
     def run(self, planes: Planes, tables: ScanTables, free: FreeBlocks, space: SearchSpace, top_nodes: np.ndarray,
             top_level: int, max_nodes: int, progress: Optional[ProgressFn],
-            deadline: float = math.inf, settled: Optional[SettledFn] = None) -> SearchRun:
+            deadline: float = math.inf, settled: Optional[SettledFn] = None, incumbent: int = 0) -> SearchRun:
         """Expand every node whose bound reaches the best leaf's band (keep_floor), from the top
         nodes (rows u, v, a, bound). Returns the leaves scoring that high (rows u, v,
         angle index, raw score) in pose order, the expansions per level, whether the
@@ -91,7 +91,10 @@ class ThreadedSearch:
 
         settled(leaves, top): called between slices with the leaves kept so far and the
         highest bound still pending (raw; every leaf not scored yet scores at most that);
-        True ends the search there - for an answer the rest cannot change."""
+        True ends the search there - for an answer the rest cannot change.
+
+        incumbent: a raw score some place is known to reach (MatchOptions.incumbent); the
+        search prunes below its band from the start, as if it had found that leaf."""
         threads = search_threads()
         order = np.argsort(-top_nodes[:, 3], kind='stable')     # deal the best nodes evenly
         heaps = [make_heap(top_nodes[order[k::threads]], top_level) for k in range(threads)]
@@ -100,7 +103,7 @@ class ThreadedSearch:
         # the incumbent: only a real leaf's score prunes, so the result is the same with it
         found = [np.stack([dive(planes, tables, free, space, *top_nodes[i, :3], top_level) for i in order[:threads]])]
         found[0] = found[0][found[0][:, 3] >= 0]
-        shared_best[0] = found[0][:, 3].max(initial=0)
+        shared_best[0] = max(found[0][:, 3].max(initial=0), incumbent)
         expanded, done = 0, [False] * threads
 
         def run(k, budget):
