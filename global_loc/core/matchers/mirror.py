@@ -5,8 +5,9 @@ message tells it from a real scan, and where the map has a place like the mirror
 the true one, the mirrored scan fits there and the answer is confident and wrong.
 
 The check: the scan's mirror image (y -> -y in the laser frame) is searched over the map
-with the tracker, pruned from the start below the answer's own fit (MatchOptions.incumbent:
-only places that come that close are scored, a fraction of a full search). When the mirror
+with the tracker, pruned from the start below the fit that would beat the answer's by the
+lead a confident answer needs (MatchOptions.incumbent: only places that come that close are
+scored, a fraction of a full search). When the mirror
 image fits some place better than the scan fits its best, by the lead a confident answer
 needs, the scan is more likely mirrored than not: not a success. Where the map is mirror
 symmetric the two fit alike and the answer stands - the scan alone cannot tell them apart.
@@ -33,7 +34,10 @@ def mirror_verdict(tracker: Tracker, points: ScanPoints, best: Candidate, option
                    progress: Optional[ProgressFn] = None) -> Optional[Verdict]:
     """None when the scan's mirror image fits no place better than the scan fits `best`
     (by the lead a confident answer needs); else the verdict that replaces a success."""
-    found = tracker.match(mirrored(points), dataclasses.replace(options, incumbent=best.score), progress)
+    lead = min(tracker.lead_needed(best.score), 0.5)
+    # only a place beating best by the lead matters: one whose refined fit reaches best / (1 - lead)
+    found = tracker.match(mirrored(points), dataclasses.replace(options, incumbent=best.score / (1.0 - lead)),
+                          progress)
     if found.stopped:
         return Verdict(Outcome.SEARCH_INCOMPLETE, 0.0, f'search incomplete: the check of the scan\'s mirror image '
                                                        f'{found.stopped}')
