@@ -8,6 +8,7 @@ from .base import Candidate, Match, Matcher, MatchOptions, MethodError, Tracker
 from .bnb import BranchAndBoundMatcher, BranchAndBoundOptions
 from .features import FeatureMatcher, make_detector, surf_available
 from .template import ccoeff_matcher, sqdiff_matcher
+from .view_features import ViewFeatureMatcher
 
 _FACTORIES = {
     'bnb': BranchAndBoundMatcher,
@@ -17,6 +18,7 @@ _FACTORIES = {
     'features_sift': lambda m: FeatureMatcher(m, 'sift'),
     'features_akaze': lambda m: FeatureMatcher(m, 'akaze'),
     'features_surf': lambda m: FeatureMatcher(m, 'surf'),
+    'features_views': ViewFeatureMatcher,
 }
 # The matcher that tracks (core.motion, the health watch) and checks a proposing matcher's
 # answer on the map (verify.py) when the configured one is not a Tracker. The thesis
@@ -38,7 +40,7 @@ def resolve_method(name: str) -> str:
         return ALIASES[name]()
     if name not in _FACTORIES:
         raise MethodError(f'unknown method {name!r}; known: {", ".join(method_names())}')
-    if name.startswith('features_'):
+    if name.startswith('features_') and name != 'features_views':
         make_detector(name.split('_', 1)[1])     # MethodError when this OpenCV build lacks it (SURF, AKAZE)
     return name
 
@@ -46,9 +48,11 @@ def resolve_method(name: str) -> str:
 # Peak bytes a thesis matcher's precomputation allocates per map cell (peak RSS measured at
 # 2000 x 2000: templates and ORB 9, SIFT 236; SURF's Hessian pyramid and AKAZE's nonlinear
 # scale space are float images per level as SIFT's: counted alike, not measured - this
-# OpenCV build has neither).
+# OpenCV build has neither). features_views: its descriptors, ~120 a view of a metre's spacing,
+# 122 measured on building_31).
 BUILD_BYTES_PER_CELL = {'template_ccoeff': 16, 'template_sqdiff': 16, 'features_orb': 24, 'features_sift': 256,
-                        'features_akaze': 256, 'features_surf': 256}
+                        'features_akaze': 256, 'features_surf': 256,
+                        'features_views': 128}
 
 
 def make_matcher(name: str, occupancy_map, bnb_options: Optional[BranchAndBoundOptions] = None) -> Matcher:

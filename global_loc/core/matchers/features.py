@@ -49,6 +49,32 @@ def make_detector(name: str):
     raise MethodError(f'unknown feature detector {name!r}; known: surf, orb, sift, akaze')
 
 
+def rigid_fits(src: np.ndarray, dst: np.ndarray, pose_of, min_inliers: int, max_fits: int,
+               max_scale_error: float) -> list[Candidate]:
+    """Sequential RANSAC (cv2.estimateAffinePartial2D) of matched pixel pairs src -> dst:
+    after a fit its inliers are removed and the rest fitted again, up to max_fits fits of
+    at least min_inliers inliers; a fit whose scale is off 1 by more than max_scale_error
+    (both images share the resolution) is no pose. Candidates `pose_of(affine)` scored by
+    their inlier count, best first."""
+    candidates = []
+    # RANSAC draws from OpenCV's per-thread RNG: seeded, the same scan gets the same
+    # answer whatever ran in this thread before (it did not: a test passed alone and
+    # failed after others)
+    cv2.setRNGSeed(0)
+    while len(src) >= min_inliers and len(candidates) < max_fits:
+        affine, inliers = cv2.estimateAffinePartial2D(src, dst, method=cv2.RANSAC, ransacReprojThreshold=3.0,
+                                                      maxIters=5000, confidence=0.995)
+        if affine is None:
+            break
+        inliers = inliers.ravel().astype(bool)
+        if inliers.sum() < min_inliers:
+            break
+        if abs(math.hypot(affine[0, 0], affine[1, 0]) - 1.0) <= max_scale_error:
+            candidates.append(Candidate(pose_of(affine), float(inliers.sum())))
+        src, dst = src[~inliers], dst[~inliers]
+    return sorted(candidates, key=lambda c: -c.score)
+
+
 class FeatureMatcher(Matcher):
     min_score = 8           # inliers
     ratio = 0.8             # Lowe's ratio test
@@ -84,25 +110,8 @@ class FeatureMatcher(Matcher):
         good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < self.ratio * p[1].distance]
         src = np.float32([kps[m.queryIdx].pt for m in good]).reshape(-1, 2)
         dst = self.map_points[[m.trainIdx for m in good]].reshape(-1, 2)
-        candidates = []
-        # RANSAC draws from OpenCV's per-thread RNG: seeded, the same scan gets the same
-        # answer whatever ran in this thread before (it did not: a test passed alone and
-        # failed after others)
-        cv2.setRNGSeed(0)
-        while len(src) >= self.min_score and len(candidates) < self.max_hypotheses:
-            affine, inliers = cv2.estimateAffinePartial2D(src, dst, method=cv2.RANSAC,
-                                                          ransacReprojThreshold=3.0, maxIters=5000,
-                                                          confidence=0.995)
-            if affine is None:
-                break
-            inliers = inliers.ravel().astype(bool)
-            scale = math.hypot(affine[0, 0], affine[1, 0])
-            if inliers.sum() < self.min_score:
-                break
-            if abs(scale - 1.0) <= self.max_scale_error:
-                candidates.append(Candidate(pose_from_match(self.map, local, affine), float(inliers.sum())))
-            src, dst = src[~inliers], dst[~inliers]
+        candidates = rigid_fits(src, dst, lambda affine: pose_from_match(self.map, local, affine), self.min_score,
+                                self.max_hypotheses, self.max_scale_error)
         if progress:
             progress(1.0, candidates[0].score if candidates else 0.0)
-        candidates.sort(key=lambda c: -c.score)
         return Match(self.distinct(candidates))
