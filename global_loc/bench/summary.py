@@ -57,7 +57,7 @@ def thesis_section(rows: list[dict]) -> list[str]:
     thesis = [r for r in comparable(rows) if r['method'] != 'bnb' and r.get('angle_step', 5) == 5]
     if not thesis:
         return []
-    lines = ['## The thesis matchers, raw and checked', '',
+    lines = ['## The thesis matchers (and features_views), raw and checked', '',
              'Raw: the matcher\'s own verdict (the best leads the next by 1%), as the thesis reported it. '
              'Checked: the same hypotheses refined and judged by bnb\'s verdict with the rest of the map searched '
              'for a rival (`core/matchers/verify.py`) - what the server publishes. Times include the check.', '',

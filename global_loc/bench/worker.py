@@ -24,6 +24,7 @@ def run_job(job):
            'truth': [round(v, 4) for v in trial.truth.as_tuple()]}
     step = trial.condition.get('angle_step', 5)
     try:
+        loc.matcher(method), loc.tracker(method)   # built once per map and worker, not in a trial's time
         if trial.points is not None:
             res = loc.localize_points(trial.points, method, step, base_T_laser=trial.base_T_laser)
         else:
