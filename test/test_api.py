@@ -54,7 +54,7 @@ class CmdVelLog:
 
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM], ids=['sigint', 'sigterm'])
 def test_an_interrupted_client_cancels_its_goal_and_the_robot_stops_turning(tmp_path, signum):
-    """Issue 24 item 2: Ctrl-C (or SIGTERM) on test_global_loc while the server turns the
+    """Ctrl-C (or SIGTERM) on test_global_loc while the server turns the
     robot to resolve an ambiguity: the goal is canceled before the client exits."""
     save_map_yaml(symmetric_room(), tmp_path / 'square.yaml')      # stays ambiguous: it would turn a full turn
     env = isolated_env()
@@ -327,7 +327,7 @@ class LossyServer(TopicRecorder):
 
 
 def test_a_goal_request_or_result_lost_in_discovery_is_asked_again():
-    """The CI failure of stop 31: a goal sent right after wait_for_server went unanswered
+    """Seen on a fresh CI machine: a goal sent right after wait_for_server went unanswered
     (GoalUnanswered after 10 s). A request unanswered while the server answers ~/get_state
     is sent again under a new goal id, and a lost result is asked for again once the
     status says the goal ended; the lost goal never ran, so the goal runs once."""

@@ -8,7 +8,7 @@ PACKAGE = pathlib.Path(__file__).resolve().parents[1] / 'global_loc'
 MAX_FILE_LINES = 350
 MAX_FUNCTION_LINES = 60       # compiled (numba) kernels excepted: a kernel cannot call helpers cheaply
 SOURCES = sorted(PACKAGE.rglob('*.py'))
-# Being split by others now (issue 23 item 8); each entry goes when its split lands.
+# Functions still to be split; each entry goes when its split lands.
 PENDING = {'bench/soak.py:soak_rows'}
 
 
@@ -51,10 +51,23 @@ def test_a_name_said_to_live_in_a_file_is_defined_there():
 
 
 def test_tests_and_comments_say_the_behaviour_not_a_defect_number():
-    """Defect lists ("issue 18, D6") are not in the repository; a name like test_d4_* tells
-    a reader nothing."""
-    numbered = re.compile(r'\bdef test_d\d+_|\bD\d+(?:-D\d+)?\b(?=[,:) ])|\bissue 18\b')
-    files = SOURCES + sorted((PACKAGE.parent / 'test').glob('*.py'))
+    """Defect lists ("issue 18, D6"), work items and session numbers are not in the
+    repository (history lives in git); a name like test_d4_* tells a reader nothing."""
+    numbered = re.compile(r'\bdef test_d\d+_|\bD\d+(?:-D\d+)?\b(?=[,:) ])|\b[Ii]ssue \d+|\b[Ss]top \d+\b|'
+                          r'\bhelper [A-Z]\b|^# -+ item \d+')
+    root = PACKAGE.parent
+    files = SOURCES + sorted((root / 'test').glob('*.py')) + sorted((root / 'docs').glob('*.md')) + [root / 'README.md']
     hits = [f'{p.name}:{k + 1}' for p in files if p.name != 'test_code_shape.py'
             for k, line in enumerate(p.read_text().splitlines()) if numbered.search(line)]
     assert not hits, hits
+
+
+def test_the_readme_and_the_server_page_state_the_clients_exit_codes():
+    """The client's docstring is the source; the README and docs/SERVER.md say the same."""
+    root = PACKAGE.parent
+    text = (PACKAGE / 'ros' / 'client.py').read_text()
+    codes = dict(re.findall(r'^  (\d)  (.+?)[:;,]', text.split('Exit codes:')[1].split('"""')[0], re.M))
+    assert codes['2'] == 'bad arguments' and codes['3'].startswith('no server answered'), codes
+    for page in (root / 'README.md', root / 'docs' / 'SERVER.md'):
+        flat = ' '.join(page.read_text().split())
+        assert '2 on bad arguments, 3 when no server answered' in flat, page

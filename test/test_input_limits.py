@@ -1,4 +1,4 @@
-"""Issue 24 items 5-9 in the core: per-goal quantities within their parameters' bounds and
+"""In the core: per-goal quantities within their parameters' bounds and
 a stated budget, scans whose fields contradict each other, upside-down lasers, priors
 tighter than the search's resolution, absurd map resolutions, map paths that are not files."""
 import json
@@ -30,7 +30,7 @@ def fan(n=181, angle_min=-math.pi / 2, increment=math.pi / 180, angle_max='consi
                 angle_max=last if angle_max == 'consistent' else angle_max)
 
 
-# ---- item 6: a scan's angle_max must agree with its other fields ----------------------------
+# ---- a scan's angle_max must agree with its other fields ----------------------------
 def test_a_mirrored_scan_is_refused_with_the_reason():
     """A filter that flipped angle_increment's sign: angle_min -pi/2, angle_max +pi/2, increment < 0."""
     mirrored = Scan(-math.pi / 2, -math.pi / 180, 0.05, 10.0, np.full(181, 2.0), angle_max=math.pi / 2)
@@ -60,7 +60,7 @@ def test_angle_max_unknown_is_not_checked_and_survives_json():
         scan_to_points(Scan.from_dict({**fan().to_dict(), 'angle_max': -1.0}))
 
 
-# ---- item 8: absurd map resolutions and sizes refused at load ------------------------------
+# ---- absurd map resolutions and sizes refused at load ------------------------------
 ABSURD_RESOLUTIONS = [1e-12, 1e-8, 1e-6, 0.0, -0.05, 1e6, math.inf, math.nan]
 
 
@@ -90,7 +90,7 @@ def test_a_grid_of_too_many_cells_is_refused_before_its_data_is_read():
         from_occupancy_grid(side, side, 0.05, (0.0, 0.0, 0.0), np.zeros(1))
 
 
-# ---- item 9: a map path that is not a regular file says what it is ------------------------
+# ---- a map path that is not a regular file says what it is ------------------------
 def test_map_yaml_that_is_a_directory_a_symlink_loop_or_a_device_says_so(tmp_path):
     os.symlink(tmp_path / 'b', tmp_path / 'a')
     os.symlink(tmp_path / 'a', tmp_path / 'b')
@@ -118,7 +118,7 @@ def test_map_image_that_is_a_fifo_or_a_loop_says_so(tmp_path):
         load_map_yaml(path)
 
 
-# ---- item 6: an upside-down laser -------------------------------------------------------
+# ---- an upside-down laser -------------------------------------------------------
 def test_mount_from_tf_reads_the_x_axis_heading_and_upside_down():
     upright = LaserMount.from_roll_pitch_yaw(0.2, -0.1, 0.0, 0.0, 0.7)
     assert upright == LaserMount(Rigid2D(0.2, -0.1, pytest.approx(0.7)), False)
@@ -174,7 +174,7 @@ def test_an_upside_down_laser_localizes_right(method, base):
     assert as_if_upright.pose is None or not pose_correct(as_if_upright.pose, base)
 
 
-# ---- item 5: a goal's work within the angle step's bounds and a stated budget -------------
+# ---- a goal's work within the angle step's bounds and a stated budget -------------
 @pytest.fixture(scope='module')
 def room_scan():
     room = small_room()

@@ -1,4 +1,4 @@
-"""`python -m global_loc localize --bag --topic A --topic B --cloud-topic C` (issue 26 item 4):
+"""`python -m global_loc localize --bag --topic A --topic B --cloud-topic C`:
 a recording's sensors merged into one view as the server merges them - each one's
 mounting from the bag's /tf_static (or --mount), clouds parsed from the recorded
 PointCloud2 by the core parser, the bag's odometry when it has one - and one line per

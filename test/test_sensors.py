@@ -1,4 +1,4 @@
-"""Several sensors in the server (issue 26), in real processes: two narrow lasers that
+"""Several sensors in the server, in real processes: two narrow lasers that
 together localize where one alone cannot, the simulator's 3D lidar alone, and every bad
 input - a sensor going silent, one with no mounting, clocks far apart, clouds whose
 layout does not fit their data - said in the result and on /diagnostics, the view going

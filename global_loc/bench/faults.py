@@ -1,4 +1,4 @@
-"""The `faults` suite: what changes while the server runs (issue 24), scripted against the
+"""The `faults` suite: what changes while the server runs, scripted against the
 real `ros2 run global_loc server` and `ros2 run global_loc sim` processes (office, 10 Hz
 x 541 beams over 270 deg) on a private DDS domain, each scenario run several times with
 seeds. A goal loop in this process sends bnb (or template) goals that publish their pose,
@@ -83,7 +83,7 @@ def map_republished(run: Run) -> None:
     run.sim(POSES[0])
     run.h.publish_map(office)
     run.loop(BNB)
-    for kind in run.rng.permutation(['race', 'race', 'padded']):     # each run has the race of issue 24 item 1
+    for kind in run.rng.permutation(['race', 'race', 'padded']):     # each run has the race of a goal with a map change
         run.sleep_between(0.5, 3.0)
         maps = [shifted(office, run.rng)] if kind == 'race' else []
         for m in maps + [padded(office, run.rng)]:

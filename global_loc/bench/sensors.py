@@ -1,4 +1,4 @@
-"""The sensors suite (issue 26): the same seeded poses on several maps seen by a front
+"""The sensors suite: the same seeded poses on several maps seen by a front
 laser of 180° and of 270°, by front and rear 270° lasers together, and by the 3D lidar,
 all cast by the pybullet simulator in the same world (extruded in 3D: the lidar's rings
 see walls, low obstacles and the floor). Each trial's view is made as the server makes

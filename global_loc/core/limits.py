@@ -1,6 +1,6 @@
 """The bounds of every quantity a request or a map brings, in one place: the goal's
 validation, the ROS parameters' ranges, the CLI and the matchers read them here, so a
-goal field can never ask for what its parameter may not (issue 24: an angle step of 1e-6
+goal field can never ask for what its parameter may not (once, an angle step of 1e-6
 on a goal built 11-22 GB of arrays while the parameter was limited to 0.1-180).
 
 Bounds are (lowest, highest), both allowed. A 0 that means "the default" or "no bound"

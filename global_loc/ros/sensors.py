@@ -1,4 +1,4 @@
-"""The server's sensors (issue 26): every configured LaserScan and PointCloud2 topic, the
+"""The server's sensors: every configured LaserScan and PointCloud2 topic, the
 newest message of each with its arrival time, each one's mounting on the base, and the
 view a request localizes (core.view.merge_view).
 
