@@ -71,3 +71,12 @@ def test_the_readme_and_the_server_page_state_the_clients_exit_codes():
     for page in (root / 'README.md', root / 'docs' / 'SERVER.md'):
         flat = ' '.join(page.read_text().split())
         assert '2 on bad arguments, 3 when no server answered' in flat, page
+
+
+def test_the_architecture_layout_names_every_module():
+    """docs/ARCHITECTURE.md's layout tree is where a new engineer looks for a module."""
+    text = (PACKAGE.parent / 'docs' / 'ARCHITECTURE.md').read_text()
+    layout = text[text.index('## Layout'):]
+    missing = [str(p.relative_to(PACKAGE)) for p in SOURCES if p.name not in ('__init__.py', '__main__.py')
+               and not re.search(rf'\b{re.escape(p.name)}\b', layout)]
+    assert not missing, missing
