@@ -24,7 +24,7 @@ from .core.motion import HypothesisFollower, Observation
 from .core.outcome import Outcome
 from .core.pose_history import PoseHistory
 from .core.scan import Scan, ScanError, scan_to_points
-from .core.transform import Rigid2D, pose_error
+from .core.transform import Rigid2D, pose_error, yaw_of_quaternion
 
 ODOMETRY = 'nav_msgs/msg/Odometry'
 
@@ -84,9 +84,9 @@ def read_odometry(path: str, topic: str) -> list[tuple[float, Rigid2D]]:
         poses = []
         for connection, _, raw in reader.messages(connections=connections):
             msg = typestore.deserialize_cdr(raw, connection.msgtype)
-            p, q = msg.pose.pose.position, msg.pose.pose.orientation
-            yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-            poses.append((msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec, Rigid2D(p.x, p.y, yaw)))
+            p = msg.pose.pose.position
+            poses.append((msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec,
+                          Rigid2D(p.x, p.y, yaw_of_quaternion(msg.pose.pose.orientation))))
     finally:
         reader.close()
     return sorted(poses, key=lambda stamped: stamped[0])

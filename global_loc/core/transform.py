@@ -14,6 +14,12 @@ from dataclasses import dataclass
 import numpy as np
 
 
+def yaw_of_quaternion(q) -> float:
+    """The heading (rotation about z) of a quaternion with fields x, y, z, w: a
+    geometry_msgs/Quaternion of rclpy or rosbags alike."""
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
 def normalize_angle(a):
     """Wrap an angle (scalar or array) to [-pi, pi)."""
     return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi if isinstance(a, np.ndarray) \

@@ -15,7 +15,7 @@ from ..core.localizer import LocalizationResult
 from ..core.map_io import OccupancyMap, from_occupancy_grid
 from ..core.outcome import Outcome
 from ..core.scan import Scan
-from ..core.transform import Rigid2D
+from ..core.transform import Rigid2D, yaw_of_quaternion
 
 
 def stamp_seconds(stamp) -> float:
@@ -42,10 +42,6 @@ def yaw_to_quaternion(yaw: float) -> Quaternion:
     return Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
 
 
-def quaternion_to_yaw(q: Quaternion) -> float:
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-
-
 def pose_to_msg(p: Rigid2D) -> Pose:
     msg = Pose()
     msg.position.x, msg.position.y = float(p.x), float(p.y)
@@ -54,7 +50,7 @@ def pose_to_msg(p: Rigid2D) -> Pose:
 
 
 def pose_from_msg(msg: Pose) -> Rigid2D:
-    return Rigid2D(msg.position.x, msg.position.y, quaternion_to_yaw(msg.orientation))
+    return Rigid2D(msg.position.x, msg.position.y, yaw_of_quaternion(msg.orientation))
 
 
 def covariance_6x6(cov3) -> list[float]:
@@ -81,7 +77,7 @@ def pose_with_covariance(p: Rigid2D, cov3, frame_id: str, stamp) -> PoseWithCova
 
 def map_from_msg(msg: OccupancyGrid) -> OccupancyMap:
     info = msg.info
-    origin = Rigid2D(info.origin.position.x, info.origin.position.y, quaternion_to_yaw(info.origin.orientation))
+    origin = Rigid2D(info.origin.position.x, info.origin.position.y, yaw_of_quaternion(info.origin.orientation))
     return from_occupancy_grid(info.width, info.height, info.resolution, origin,
                                np.asarray(msg.data, dtype=np.int16), source=f'OccupancyGrid on {msg.header.frame_id}')
 
