@@ -12,9 +12,9 @@ from global_loc.core.localizer import Localizer
 from global_loc.core.matchers.bnb import BranchAndBoundMatcher
 from global_loc.core.mount3d import Mount3D, Mount3DError
 from global_loc.core.pose_history import PoseHistory
-from global_loc.core.scan import scan_to_points
+from global_loc.core.scan import scan_to_points, voxel_filter
 from global_loc.core.transform import Rigid2D
-from global_loc.core.view import SensorReading, ViewConfig, ViewError, merge_view, reading_from_scan, voxel_filter
+from global_loc.core.view import SensorReading, ViewConfig, ViewError, merge_view, reading_from_scan
 from global_loc.sim.raycast import simulate_scan
 
 FRONT = Mount3D(0.16, 0.0, 0.30)

@@ -155,3 +155,15 @@ def require_shape(points: ScanPoints) -> ScanPoints:
 def polar_to_points(ranges: np.ndarray, angles: np.ndarray) -> np.ndarray:
     """(N, 2) laser-frame points of beams of `ranges` at `angles`."""
     return np.stack([ranges * np.cos(angles), ranges * np.sin(angles)], axis=1)
+
+
+def voxel_filter(points: np.ndarray, size: float) -> np.ndarray:
+    """The first point (in order) of each size x size cell; all of them when size is 0.
+    Cells are floor(p / size): bnb keeps one point per map cell with it, and a view
+    filtered at the map's resolution gives bnb exactly the points it would keep."""
+    if size <= 0 or len(points) == 0:
+        return points
+    keys = np.floor(points / size).astype(np.int64)
+    keys -= keys.min(axis=0)
+    _, first = np.unique(keys[:, 0] * (int(keys[:, 1].max()) + 1) + keys[:, 1], return_index=True)
+    return points[np.sort(first)]

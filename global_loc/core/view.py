@@ -26,7 +26,7 @@ import numpy as np
 
 from .mount3d import Mount3D
 from .pose_history import PoseHistory
-from .scan import Scan, ScanError, ScanPoints, scan_to_points
+from .scan import Scan, ScanError, ScanPoints, scan_to_points, voxel_filter
 from .transform import Rigid2D
 
 OdometryFn = Callable[[float], Optional[Rigid2D]]     # stamp -> base pose in the odometry frame
@@ -234,15 +234,3 @@ def _base_view(parts: list, config: ViewConfig) -> ScanPoints:
     sensor_reach = max(p[0].range_max for p in parts)
     range_max = max(reach, sensor_reach if math.isfinite(sensor_reach) else reach)
     return ScanPoints(xy, range_max, len(xy), beams=False)
-
-
-def voxel_filter(points: np.ndarray, size: float) -> np.ndarray:
-    """The first point (in order) of each size x size cell; all of them when size is 0.
-    Cells are floor(p / size): the same grid as bnb's own one-cell filter at its map's
-    resolution, so a view filtered at that size gives bnb exactly the points it would keep."""
-    if size <= 0 or len(points) == 0:
-        return points
-    keys = np.floor(points / size).astype(np.int64)
-    keys -= keys.min(axis=0)
-    _, first = np.unique(keys[:, 0] * (int(keys[:, 1].max()) + 1) + keys[:, 1], return_index=True)
-    return points[np.sort(first)]

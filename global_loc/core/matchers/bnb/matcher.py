@@ -28,7 +28,7 @@ import numpy as np
 from ...map_io import OccupancyMap
 from ...outcome import Outcome
 from ...pixel_kernels import warm_up as warm_up_pixel_kernels
-from ...scan import ScanPoints
+from ...scan import ScanPoints, voxel_filter
 from ...search_region import SearchRegion
 from ...transform import Rigid2D
 from ..base import Candidate, Match, Matcher, MatchOptions, ProgressFn
@@ -81,12 +81,7 @@ class BranchAndBoundMatcher(Matcher):
 
     def prepare(self, points: np.ndarray) -> np.ndarray:
         """One point per cell (voxel filter), at most max_points of them, evenly chosen."""
-        res = self.map.resolution
-        points = points[np.hypot(points[:, 0], points[:, 1]) <= self.options.max_range]
-        keys = np.floor(points / res).astype(np.int64)
-        keys -= keys.min(axis=0, initial=0)      # one integer per cell: np.unique on rows is ~7x slower
-        _, first = np.unique(keys[:, 0] * (int(keys[:, 1].max(initial=0)) + 1) + keys[:, 1], return_index=True)
-        pts = points[np.sort(first)]
+        pts = voxel_filter(points[np.hypot(points[:, 0], points[:, 1]) <= self.options.max_range], self.map.resolution)
         if len(pts) > self.options.max_points:
             pts = pts[np.linspace(0, len(pts) - 1, self.options.max_points).astype(int)]
         return pts
