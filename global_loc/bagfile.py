@@ -15,6 +15,7 @@ from .core.mount import LaserMount, MountError
 from .core.mount3d import Mount3D
 from .core.scan import Scan
 from .core.transform import Rigid2D
+from .io.messages import scan_from_msg
 
 LASER_SCAN = 'sensor_msgs/msg/LaserScan'
 TF_MESSAGE = 'tf2_msgs/msg/TFMessage'
@@ -74,20 +75,9 @@ def read_scans(path: str, topic: str, every: int = 1) -> Iterator[tuple[int, Sca
         for index, (connection, _, raw) in enumerate(reader.messages(connections=connections)):
             if index % every:
                 continue
-            yield index, scan_of(typestore.deserialize_cdr(raw, connection.msgtype))
+            yield index, scan_from_msg(typestore.deserialize_cdr(raw, connection.msgtype))
     finally:
         reader.close()
-
-
-def stamp_of(msg) -> float:
-    """A message's header stamp, s."""
-    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-
-
-def scan_of(msg) -> Scan:
-    """A deserialized sensor_msgs/LaserScan as a core Scan with its header's stamp."""
-    return Scan(float(msg.angle_min), float(msg.angle_increment), float(msg.range_min), float(msg.range_max),
-                msg.ranges.astype(float), stamp_of(msg), float(msg.angle_max))
 
 
 def read_mounting(path: str, topic: str, base_frame: str) -> BagMounting:

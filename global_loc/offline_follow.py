@@ -24,7 +24,8 @@ from .core.motion import HypothesisFollower, Observation
 from .core.outcome import Outcome
 from .core.pose_history import PoseHistory
 from .core.scan import Scan, ScanError, scan_to_points
-from .core.transform import Rigid2D, pose_error, yaw_of_quaternion
+from .core.transform import Rigid2D, pose_error
+from .io.messages import pose_from_msg, stamp_seconds
 
 ODOMETRY = 'nav_msgs/msg/Odometry'
 
@@ -84,9 +85,7 @@ def read_odometry(path: str, topic: str) -> list[tuple[float, Rigid2D]]:
         poses = []
         for connection, _, raw in reader.messages(connections=connections):
             msg = typestore.deserialize_cdr(raw, connection.msgtype)
-            p = msg.pose.pose.position
-            poses.append((msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec,
-                          Rigid2D(p.x, p.y, yaw_of_quaternion(msg.pose.pose.orientation))))
+            poses.append((stamp_seconds(msg.header.stamp), pose_from_msg(msg.pose.pose)))
     finally:
         reader.close()
     return sorted(poses, key=lambda stamped: stamped[0])

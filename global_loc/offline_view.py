@@ -30,8 +30,6 @@ from .bagfile import (
     open_bag,
     read_mountings,
     scan_connections,
-    scan_of,
-    stamp_of,
 )
 from .core.cloud import CloudError, CloudField, PackedCloud, cloud_xyz
 from .core.mount3d import Mount3D, Mount3DError
@@ -39,6 +37,7 @@ from .core.outcome import Outcome
 from .core.pose_history import PoseHistory
 from .core.scan import ScanError
 from .core.view import SensorReading, ViewConfig, ViewError, merge_view, reading_from_scan
+from .io.messages import scan_from_msg, stamp_seconds
 
 POINT_CLOUD2 = 'sensor_msgs/msg/PointCloud2'
 
@@ -108,7 +107,7 @@ def read_stamps(path: str, sensors: list[BagSensor]) -> dict:
         messages = {s.topic: [] for s in sensors}
         for connection, _, raw in reader.messages(connections=[c for cs in connections.values() for c in cs]):
             msg = typestore.deserialize_cdr(raw, connection.msgtype)
-            messages[connection.topic].append((stamp_of(msg), connection.msgtype, raw))
+            messages[connection.topic].append((stamp_seconds(msg.header.stamp), connection.msgtype, raw))
     finally:
         reader.close()
     for found in messages.values():
@@ -138,12 +137,12 @@ def reading_of(sensor: BagSensor, message, typestore) -> SensorReading:
                         'PITCH YAW')
     msg = typestore.deserialize_cdr(message[2], message[1])
     if sensor.msgtype == LASER_SCAN:
-        return reading_from_scan(sensor.topic, scan_of(msg), sensor.mount)
+        return reading_from_scan(sensor.topic, scan_from_msg(msg), sensor.mount)
     try:
         points = cloud_xyz(packed_of(msg))
     except CloudError as e:
         raise ViewError(f'cloud unusable: {e}') from None
-    return SensorReading(sensor.topic, stamp_of(msg), points, sensor.mount)
+    return SensorReading(sensor.topic, stamp_seconds(msg.header.stamp), points, sensor.mount)
 
 
 def views(sensors: list[BagSensor], messages: dict, every: int, config: ViewConfig, odometry):

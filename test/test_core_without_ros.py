@@ -1,10 +1,11 @@
-"""The ROS boundary: every module of global_loc/core and global_loc/sim imports with
+"""The ROS boundary: every module of global_loc/core, global_loc/io and global_loc/sim imports with
 rclpy, every *_msgs package and global_loc_interfaces made unimportable."""
 import pkgutil
 import subprocess
 import sys
 
 import global_loc.core
+import global_loc.io
 import global_loc.sim
 
 BLOCKER = '''
@@ -30,7 +31,7 @@ def modules_of(package) -> list[str]:
 
 
 def test_core_and_simulator_import_without_ros():
-    names = modules_of(global_loc.core) + modules_of(global_loc.sim)
+    names = modules_of(global_loc.core) + modules_of(global_loc.io) + modules_of(global_loc.sim)
     assert 'global_loc.core.matchers.bnb.verdict' in names and 'global_loc.sim.simulator' in names
     out = subprocess.run([sys.executable, '-c', BLOCKER, *names], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr

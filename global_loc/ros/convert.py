@@ -1,5 +1,5 @@
-"""Message <-> core type conversions, shared by the ROS nodes (server, client, sim): the
-only place that knows both a message's fields and a core type's."""
+"""Core types -> messages, shared by the ROS nodes (server, client, sim), and the readers
+of io/messages.py (which need no rclpy: the offline commands read bags with them)."""
 from __future__ import annotations
 
 import math
@@ -17,15 +17,8 @@ from ..core.outcome import Outcome
 from ..core.scan import Scan
 from ..core.transform import Rigid2D, yaw_of_quaternion
 
-
-def stamp_seconds(stamp) -> float:
-    """A builtin_interfaces/Time as seconds."""
-    return stamp.sec + 1e-9 * stamp.nanosec
-
-
-def scan_from_msg(msg: LaserScan) -> Scan:
-    return Scan(msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max,
-                np.asarray(msg.ranges, dtype=float), stamp_seconds(msg.header.stamp), msg.angle_max)
+# the readers serve rclpy and rosbags messages alike (io/messages.py); the nodes import them from here too
+from ..io.messages import pose_from_msg, scan_from_msg, stamp_seconds  # noqa: F401
 
 
 def scan_to_msg(scan: Scan, frame_id: str, stamp, scan_time: float = 0.0) -> LaserScan:
@@ -47,10 +40,6 @@ def pose_to_msg(p: Rigid2D) -> Pose:
     msg.position.x, msg.position.y = float(p.x), float(p.y)
     msg.orientation = yaw_to_quaternion(p.yaw)
     return msg
-
-
-def pose_from_msg(msg: Pose) -> Rigid2D:
-    return Rigid2D(msg.position.x, msg.position.y, yaw_of_quaternion(msg.orientation))
 
 
 def covariance_6x6(cov3) -> list[float]:
