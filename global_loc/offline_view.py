@@ -31,13 +31,12 @@ from .bagfile import (
     read_mountings,
     scan_connections,
 )
-from .core.cloud import CloudError, CloudField, PackedCloud, cloud_xyz
 from .core.mount3d import Mount3D, Mount3DError
 from .core.outcome import Outcome
 from .core.pose_history import PoseHistory
 from .core.scan import ScanError
-from .core.view import SensorReading, ViewConfig, ViewError, merge_view, reading_from_scan
-from .io.messages import scan_from_msg, stamp_seconds
+from .core.view import SensorReading, ViewConfig, ViewError, merge_view
+from .io.messages import reading_from_msg, stamp_seconds
 
 POINT_CLOUD2 = 'sensor_msgs/msg/PointCloud2'
 
@@ -48,13 +47,6 @@ class BagSensor:
     msgtype: str                      # LASER_SCAN or POINT_CLOUD2
     mount: Mount3D | None             # None: nobody says where it sits (left out)
     mounting: dict                    # where the mount came from, for the output line
-
-
-def packed_of(msg) -> PackedCloud:
-    """A deserialized sensor_msgs/PointCloud2 as core.cloud's PackedCloud (its layout as sent)."""
-    fields = tuple(CloudField(str(f.name), int(f.offset), int(f.datatype), int(f.count)) for f in msg.fields)
-    return PackedCloud(int(msg.height), int(msg.width), fields, bool(msg.is_bigendian), int(msg.point_step),
-                       int(msg.row_step), msg.data, bool(msg.is_dense))
 
 
 def mount_flags(values) -> dict:
@@ -136,13 +128,7 @@ def reading_of(sensor: BagSensor, message, typestore) -> SensorReading:
         raise ViewError(f'no mounting: {sensor.mounting["because"]}, and no --mount {sensor.topic} X Y Z ROLL '
                         'PITCH YAW')
     msg = typestore.deserialize_cdr(message[2], message[1])
-    if sensor.msgtype == LASER_SCAN:
-        return reading_from_scan(sensor.topic, scan_from_msg(msg), sensor.mount)
-    try:
-        points = cloud_xyz(packed_of(msg))
-    except CloudError as e:
-        raise ViewError(f'cloud unusable: {e}') from None
-    return SensorReading(sensor.topic, stamp_seconds(msg.header.stamp), points, sensor.mount)
+    return reading_from_msg(sensor.topic, sensor.msgtype == LASER_SCAN, msg, sensor.mount)
 
 
 def views(sensors: list[BagSensor], messages: dict, every: int, config: ViewConfig, odometry):

@@ -3,10 +3,15 @@
 ros/convert.py; both they and the offline commands read them here."""
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 
+from ..core.cloud import CloudError, CloudField, PackedCloud, cloud_xyz
+from ..core.mount3d import Mount3D
 from ..core.scan import Scan
 from ..core.transform import Rigid2D, yaw_of_quaternion
+from ..core.view import SensorReading, ViewError, reading_from_scan
 
 
 def stamp_seconds(stamp) -> float:
@@ -23,3 +28,22 @@ def scan_from_msg(msg) -> Scan:
 def pose_from_msg(msg) -> Rigid2D:
     """A geometry_msgs/Pose's position and heading."""
     return Rigid2D(msg.position.x, msg.position.y, yaw_of_quaternion(msg.orientation))
+
+
+def packed_from_msg(msg) -> PackedCloud:
+    """A sensor_msgs/PointCloud2's layout and data as sent (core.cloud reads and checks it)."""
+    fields = tuple(CloudField(str(f.name), int(f.offset), int(f.datatype), int(f.count)) for f in msg.fields)
+    return PackedCloud(int(msg.height), int(msg.width), fields, bool(msg.is_bigendian), int(msg.point_step),
+                       int(msg.row_step), msg.data, bool(msg.is_dense))
+
+
+def reading_from_msg(topic: str, is_scan: bool, msg, mount: Mount3D, received: Optional[float] = None) -> SensorReading:
+    """A LaserScan (`is_scan`) or PointCloud2 as one sensor's reading; ViewError (a
+    ScanError, or the cloud's CloudError said) when it is unusable."""
+    if is_scan:
+        return reading_from_scan(topic, scan_from_msg(msg), mount, received)
+    try:
+        points = cloud_xyz(packed_from_msg(msg))
+    except CloudError as e:
+        raise ViewError(f'cloud unusable: {e}') from None
+    return SensorReading(topic, stamp_seconds(msg.header.stamp), points, mount, received=received)

@@ -5,13 +5,8 @@ from __future__ import annotations
 import numpy as np
 from sensor_msgs.msg import PointCloud2, PointField
 
-from ..core.cloud import CloudField, PackedCloud, cloud_xyz, pack_cloud
-
-
-def packed_from_msg(msg: PointCloud2) -> PackedCloud:
-    fields = tuple(CloudField(f.name, f.offset, f.datatype, f.count) for f in msg.fields)
-    return PackedCloud(msg.height, msg.width, fields, msg.is_bigendian, msg.point_step, msg.row_step,
-                       msg.data, msg.is_dense)
+from ..core.cloud import cloud_xyz, pack_cloud
+from ..io.messages import packed_from_msg
 
 
 def cloud_from_msg(msg: PointCloud2) -> np.ndarray:

@@ -20,15 +20,13 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Optional
 
-from ..core.cloud import CloudError
 from ..core.motion import pose_fitter
 from ..core.mount import LaserMount, MountError
 from ..core.mount3d import Mount3D, Mount3DError
 from ..core.outcome import CanceledError
 from ..core.scan import ScanError, scan_to_points
-from ..core.view import SensorReading, View, ViewConfig, ViewError, merge_view, reading_from_scan
-from .cloud import cloud_from_msg
-from .convert import scan_from_msg, stamp_seconds
+from ..core.view import SensorReading, View, ViewConfig, ViewError, merge_view
+from ..io.messages import reading_from_msg, scan_from_msg
 
 SCAN, CLOUD = 'scan', 'cloud'
 
@@ -216,14 +214,7 @@ class SensorInputs:
 
 def reading_of(spec: SensorSpec, arrival: float, msg, mount: Callable) -> SensorReading:
     """One message as a SensorReading; ViewError (ScanError, CloudError said) when unusable."""
-    frame = msg.header.frame_id
-    if spec.kind == SCAN:
-        return reading_from_scan(spec.topic, scan_from_msg(msg), mount(spec, frame), arrival)
-    try:
-        points = cloud_from_msg(msg)
-    except CloudError as e:
-        raise ViewError(f'cloud unusable: {e}') from None
-    return SensorReading(spec.topic, stamp_seconds(msg.header.stamp), points, mount(spec, frame), received=arrival)
+    return reading_from_msg(spec.topic, spec.kind == SCAN, msg, mount(spec, msg.header.frame_id), arrival)
 
 
 def make_view(inputs: SensorInputs, newest: dict, since: float, mount: Callable, odometry,
