@@ -19,7 +19,7 @@ from .core.limits import check_within
 from .core.localizer import Localizer, LocalizerConfig
 from .core.map_io import MapError, load_map_yaml
 from .core.matchers import BranchAndBoundOptions, MethodError, method_names
-from .core.matchers.bnb.options import option_fields
+from .core.matchers.bnb import option_fields
 from .core.mount import LaserMount
 from .core.outcome import Outcome
 from .core.paths import default_map_yaml

@@ -5,7 +5,7 @@ recorded odometry (core.motion.HypothesisFollower, the server's loop, timed by t
 stamps) for up to --follow-s seconds of recording; one JSON line per start.
 
 Odometry: a bag's nav_msgs/Odometry (the base in the odometry frame), interpolated at each
-scan's stamp; a CARMEN log's ODOM records (bench.carmen: its FLASER odom fields are the
+scan's stamp; a CARMEN log's ODOM records (io/carmen.py: its FLASER odom fields are the
 corrected pose - the truth - and are not used), whose corrected pose is the truth of each
 line's pose.
 """
@@ -107,7 +107,7 @@ def bag_frames(path: str, scan_topic: str, odom_topic: str) -> list[Frame]:
 def carmen_frames(path: str) -> list[Frame]:
     """Every FLASER scan of a CARMEN log with its raw odometry and corrected pose (laser poses:
     the base is the laser)."""
-    from .bench.carmen import read_flaser
+    from .io.carmen import read_flaser
     return [Frame(i, r.scan, r.odometry, r.pose, f' (line {r.line})') for i, r in enumerate(read_flaser(path))]
 
 
@@ -193,7 +193,7 @@ def start_indices(frames: list[Frame], every: int) -> list[int]:
 def carmen_map(path: str):
     """The occupancy map of a CARMEN log built from all its scans at their corrected poses
     (5 cm): the map a user of `--carmen` without `--map` localizes in."""
-    from .bench.carmen import LogGrid, read_flaser
+    from .io.carmen import LogGrid, read_flaser
     records = read_flaser(path)
     grid = LogGrid(records, 0.05)
     return grid.occupancy_map(grid.counts(records), f'{path} (built from its scans)')

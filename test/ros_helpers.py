@@ -7,7 +7,7 @@ import sys
 
 from conftest import TEST_DIR
 from global_loc.core.transform import Rigid2D
-from global_loc.ros.processes import Process, run_client
+from global_loc.testing.processes import Process, run_client
 
 TRUTH = Rigid2D(3.0, 4.0, 0.7)     # an office place every matcher but features gets right (test_matchers)
 

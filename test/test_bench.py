@@ -108,7 +108,7 @@ def test_isolated_env_picks_a_dds_domain_no_process_here_uses():
     mix the two (seen: the fault suite's goals answered `not_active` by another run's server)."""
     import socket
 
-    processes = pytest.importorskip('global_loc.ros.processes')
+    processes = pytest.importorskip('global_loc.testing.processes')
     free = max(d for d in processes.DOMAINS if d not in processes.domains_in_use())
     held = []
     try:

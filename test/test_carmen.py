@@ -4,8 +4,9 @@ import math
 import numpy as np
 
 from conftest import shared_path
-from global_loc.bench.carmen import LogGrid, explained_fraction, held_out_folds, read_flaser
+from global_loc.bench.carmen import explained_fraction, held_out_folds
 from global_loc.core.scan import scan_to_points
+from global_loc.io.carmen import LogGrid, read_flaser
 
 
 def test_intel_log_parses_with_beam_geometry_and_no_return_value():

@@ -4,17 +4,14 @@ scans read so were localized confidently and wrong (the mirror image of a place)
 refuses those where the mirror image fits better; real scans keep their answers."""
 import dataclasses
 
-import numpy as np
 import pytest
 
-from conftest import OFFICE_YAML
+from conftest import seeded_office_scans
 from global_loc.core.localizer import Localizer, LocalizerConfig
-from global_loc.core.map_io import load_map_yaml
 from global_loc.core.matchers import MatchOptions
 from global_loc.core.outcome import Outcome
 from global_loc.core.scan import scan_to_points
 from global_loc.core.transform import pose_correct
-from global_loc.sim.raycast import sample_free_poses, simulate_scan
 
 # Of the seeded sequence below: mirrored, confidently wrong before the check (10 as well, but
 # it sits at a mirror-symmetric spot: its mirror image fits exactly as well, and it stays)
@@ -23,14 +20,7 @@ WRONG_WHEN_MIRRORED = (6, 12, 15)
 
 @pytest.fixture(scope='module')
 def office_scans():
-    office = load_map_yaml(OFFICE_YAML)
-    rng = np.random.default_rng(0)
-    scans = []
-    for pose in sample_free_poses(office, 20, rng):
-        scans.append((simulate_scan(office, pose, 270, 541, 20.0, noise_std=0.01, dropout=0.02, rng=rng), pose))
-        if len(scans) == 16:
-            break
-    return office, scans
+    return seeded_office_scans(16)
 
 
 def read_the_wrong_way_round(scan):

@@ -21,7 +21,7 @@ from global_loc.core.map_io import save_map_yaml
 from global_loc.core.outcome import Outcome
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import pose_from_msg
-from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, start_client, start_server
+from global_loc.testing.processes import TopicRecorder, isolated_env, reliable, start_client, start_server
 
 pytestmark = pytest.mark.ros   # real ROS processes (the compat run has no ROS: -m 'not ros')
 

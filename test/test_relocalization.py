@@ -30,7 +30,7 @@ from global_loc.ros.convert import (
     stamp_seconds,
 )
 from global_loc.ros.motion import resolve_by_motion
-from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, run_client, start_server, start_sim
+from global_loc.testing.processes import TopicRecorder, isolated_env, reliable, run_client, start_server, start_sim
 from global_loc.sim.laser import LaserConfig
 from global_loc.sim.simulator import BASE_T_LASER, Simulator
 

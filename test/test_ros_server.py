@@ -12,7 +12,7 @@ from conftest import OFFICE_YAML, assert_pose_near, symmetric_room
 from global_loc.core.outcome import Outcome
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import pose_from_msg
-from global_loc.ros.processes import (
+from global_loc.testing.processes import (
     TopicRecorder,
     isolated_env,
     reliable,

@@ -20,7 +20,7 @@ from conftest import OFFICE_YAML, assert_pose_near
 from global_loc.core.map_io import load_map_yaml, make_map, save_map_yaml
 from global_loc.core.transform import Rigid2D, pose_correct
 from global_loc.ros.convert import map_to_msg, pose_from_msg
-from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, start_client, start_server
+from global_loc.testing.processes import TopicRecorder, isolated_env, reliable, start_client, start_server
 
 pytestmark = pytest.mark.ros
 

@@ -12,7 +12,7 @@ import pytest
 from ros_helpers import TRUTH, start_scan_publisher
 
 from conftest import OFFICE_YAML
-from global_loc.ros.processes import isolated_env, start_client, start_server, start_sim
+from global_loc.testing.processes import isolated_env, start_client, start_server, start_sim
 
 pytestmark = pytest.mark.ros   # real ROS processes (the compat run has no ROS: -m 'not ros')
 

@@ -196,7 +196,7 @@ def test_sim_node_publishes_the_rear_laser_and_the_lidar_when_enabled(tmp_path):
     from sensor_msgs.msg import LaserScan, PointCloud2
 
     from global_loc.ros.cloud import cloud_from_msg
-    from global_loc.ros.processes import TopicRecorder, isolated_env, reliable, start_sim
+    from global_loc.testing.processes import TopicRecorder, isolated_env, reliable, start_sim
     env = isolated_env()
     sim = start_sim(env, tmp_path / 'sim.log', 'rear_laser:=true', 'lidar3d:=true', 'x:=3.0', 'y:=4.0', 'yaw:=0.7')
     recorder = TopicRecorder(env, {'/scan_rear': (LaserScan, reliable(5)), '/points': (PointCloud2, reliable(2)),

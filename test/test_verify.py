@@ -7,25 +7,15 @@ import json
 import numpy as np
 import pytest
 
-from conftest import OFFICE_YAML
+from conftest import OFFICE_YAML, seeded_office_scans
 from global_loc.core.localizer import Localizer, LocalizerConfig
-from global_loc.core.map_io import load_map_yaml
 from global_loc.core.outcome import Outcome
 from global_loc.core.transform import pose_correct
-from global_loc.sim.raycast import sample_free_poses, simulate_scan
 
 
 @pytest.fixture(scope='module')
 def office_scans():
-    """The first 11 scans of a seeded sequence of 20 (the seed, count and order fix them), with their truth."""
-    office = load_map_yaml(OFFICE_YAML)
-    rng = np.random.default_rng(0)
-    scans = []
-    for pose in sample_free_poses(office, 20, rng):
-        scans.append((simulate_scan(office, pose, 270, 541, 20.0, noise_std=0.01, dropout=0.02, rng=rng), pose))
-        if len(scans) == 11:
-            break
-    return office, scans
+    return seeded_office_scans(11)
 
 
 @pytest.mark.parametrize('index', [1, 10])

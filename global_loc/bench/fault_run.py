@@ -13,7 +13,7 @@ import numpy as np
 from ..core.outcome import Outcome
 from ..core.transform import Rigid2D
 from ..sim.simulator import BASE_T_LASER
-from .ros_harness import Harness
+from ..testing.ros_harness import Harness
 
 GOAL_BOUND_S = 20.0      # a goal waits <= 2 s for a scan and searches <= 2 s: unanswered by then, a hang
 EXIT_BOUND_S = 10.0      # a process signalled to end
@@ -27,7 +27,7 @@ class Run:
     """One scenario run: its processes, the harness, the goal loop and what they saw."""
 
     def __init__(self, scenario: str, seed: int, log_dir: str):
-        from ..ros.processes import isolated_env
+        from ..testing.processes import isolated_env
         self.scenario, self.seed, self.log_dir = scenario, seed, log_dir
         self.rng = np.random.default_rng(seed)
         self.env = isolated_env()
@@ -44,12 +44,12 @@ class Run:
         return os.path.join(self.log_dir, f'{name}.log')
 
     def server(self, *params):
-        from ..ros.processes import start_server
+        from ..testing.processes import start_server
         self.processes['server'] = start_server(self.env, self.log('server'), *SERVER_PARAMS, *params)
         return self.processes['server']
 
     def sim(self, pose: Rigid2D | None = None, name: str = 'sim'):
-        from ..ros.processes import start_sim
+        from ..testing.processes import start_sim
         pose = pose or POSES[int(self.rng.integers(len(POSES)))]
         self.processes[name] = start_sim(self.env, self.log(name), f'x:={pose.x}', f'y:={pose.y}', f'yaw:={pose.yaw}',
                                          f'seed:={int(self.rng.integers(1000))}')

@@ -49,8 +49,8 @@ from tqdm import tqdm
 
 from ..core.map_io import OccupancyMap, load_map_yaml, make_map
 from ..core.paths import default_map_yaml
+from ..testing.ros_harness import StandInLocalizer
 from .fault_run import EXIT_BOUND_S, POSES, Run
-from .ros_harness import StandInLocalizer
 
 AUTO_RELOCALIZE = ('auto_relocalize:=true', 'relocalize.start_delay_s:=0.5', 'relocalize.settle_s:=2.0',
                    'relocalize.min_interval_s:=1.0', 'relocalize.max_attempts:=20')
@@ -202,7 +202,7 @@ def params_mid_goal(run: Run) -> None:
 
 
 def client_killed(run: Run) -> None:
-    from ..ros.processes import start_client
+    from ..testing.processes import start_client
     server = run.server()
     run.sim()
     for sig in (signal.SIGINT, signal.SIGKILL)[::int(run.rng.choice([1, -1]))]:

@@ -16,8 +16,9 @@ import numpy as np
 
 from ..core.localizer import Localizer
 from ..core.transform import CORRECT_XY_M, CORRECT_YAW_DEG, Rigid2D
+from ..io.carmen import GridCounts, LogGrid, read_flaser
 from ..offline_follow import FollowBounds, Frame, follow_start
-from .carmen import GridCounts, LogGrid, explained_fraction, read_flaser
+from .carmen import explained_fraction
 from .tables import group, pct, secs
 
 LOGS = ('intel', 'freiburg-079', 'aces')

@@ -35,13 +35,13 @@ from ..core.paths import default_map_yaml
 from ..core.transform import pose_correct
 from ..sim.raycast import sample_free_poses
 from ..sim.simulator import BASE_T_LASER
-from .ros_harness import Harness, rss_mb
+from ..testing.ros_harness import Harness, rss_mb
 
 WARM_UP_GOALS = 20
 
 
 def soak_rows(goals: int, seed: int, log_dir: str) -> list[dict]:
-    from ..ros.processes import isolated_env, start_server, start_sim
+    from ..testing.processes import isolated_env, start_server, start_sim
     rng = np.random.default_rng(seed)
     office = load_map_yaml(default_map_yaml())
     kidnap_poses = sample_free_poses(office, 200, rng, clearance=0.6)

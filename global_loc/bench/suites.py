@@ -14,11 +14,12 @@ from ..core.paths import default_map_yaml
 from ..core.scan import Scan, ScanPoints
 from ..core.search_region import SearchRegion
 from ..core.transform import Rigid2D
+from ..io.carmen import LogGrid, read_flaser
 from ..sim.laser import LaserConfig
 from ..sim.raycast import points_cut_from_map, sample_free_poses
 from ..sim.simulator import BASE_T_LASER, Simulator
 from ..sim.synthetic_maps import aisles_with_a_box, symmetric_room
-from .carmen import LogGrid, held_out_folds, read_flaser
+from .carmen import held_out_folds
 
 THESIS_METHODS = ['template_ccoeff', 'template_sqdiff', 'features_orb', 'features_sift']
 # features_views: ours, features matched against views of the map (a proposer checked as the thesis's are)

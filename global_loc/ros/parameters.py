@@ -18,7 +18,7 @@ from rclpy.parameter import Parameter
 from ..core import limits
 from ..core.localizer import LocalizerConfig
 from ..core.matchers import TRACKER_METHOD, BranchAndBoundOptions, method_names, resolve_method
-from ..core.matchers.bnb.options import option_fields, option_range
+from ..core.matchers.bnb import option_fields, option_range
 from ..core.mount import LaserMount, MountError
 from ..core.mount3d import Mount3D
 from ..core.paths import default_map_yaml

@@ -43,7 +43,7 @@ class Harness:
         from global_loc_interfaces.action import Localize
 
         from ..ros.convert import pose_from_msg
-        from ..ros.processes import reliable
+        from .processes import reliable
         self.Localize, self.PoseStamped = Localize, PoseStamped
         self.pose_from_msg = pose_from_msg
         self.context = rclpy.Context()
@@ -173,7 +173,7 @@ class StandInLocalizer:
         import rclpy
         from geometry_msgs.msg import PoseWithCovarianceStamped
 
-        from ..ros.processes import reliable
+        from .processes import reliable
         self.h, self.rng, self.drop = harness, rng, drop
         self.node = rclpy.create_node('stand_in_amcl', context=harness.context)
         self.pose, self.taken, self.dropped = None, [], 0      # taken: (monotonic time, right)
