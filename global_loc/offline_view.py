@@ -155,15 +155,9 @@ def views(sensors: list[BagSensor], messages: dict, every: int, config: ViewConf
                 reasons[sensor.topic] = f'{type(e).__name__}: {e}'
         where = {'index': index, 'stamp': round(start[0], 9)}
         try:
-            if not readings:
-                raise ViewError('no sensor contributed to the view (' +
-                                '; '.join(f'{t}: {why}' for t, why in reasons.items()) + ')')
-            view = merge_view(readings, odometry, config=config)
+            yield where, merge_view(readings, odometry, config=config, unread=reasons)
         except ViewError as e:
             yield where, e
-            continue
-        view.left_out.update(reasons)
-        yield where, view
 
 
 def localize_views(args, localizer, method: str, result_fields) -> int:

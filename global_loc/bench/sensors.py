@@ -62,14 +62,10 @@ def view_or_error(readings: dict):
             made[name] = reading()
         except ScanError as e:
             reasons[name] = f'{type(e).__name__}: {e}'
-    if not made:
-        return ScanError('no sensor gave a usable view (' + '; '.join(f'{n}: {w}' for n, w in reasons.items()) + ')')
     try:
-        view = merge_view(made)
+        return merge_view(made, unread=reasons)
     except ScanError as e:        # ViewError too
         return e
-    view.left_out.update(reasons)
-    return view
 
 
 def sensors_trials(maps: dict[str, OccupancyMap], poses_per_map: int, seed: int) -> list[Trial]:

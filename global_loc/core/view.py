@@ -106,12 +106,15 @@ class View:
 
 def merge_view(readings: Mapping[str, Optional[SensorReading]],
                odometry: Union[PoseHistory, OdometryFn, None] = None,
-               reference_stamp: Optional[float] = None, config: ViewConfig = ViewConfig()) -> View:
+               reference_stamp: Optional[float] = None, config: ViewConfig = ViewConfig(),
+               unread: Optional[Mapping[str, str]] = None) -> View:
     """The view of every sensor in `readings` (sensor -> its newest reading, None: none
     yet) that can be merged, at `reference_stamp` (None: the newest contributing stamp).
     `odometry`: a PoseHistory or a stamp -> pose callable; None: the robot stood still.
-    Raises ViewError when no sensor contributes a point."""
-    left_out = {name: 'silent: no reading received' for name, r in readings.items() if r is None}
+    `unread`: sensors whose message gave no reading -> why (left out, said). Raises
+    ViewError, saying every sensor's reason, when no sensor contributes a point."""
+    left_out = dict(unread or {})
+    left_out.update({name: 'silent: no reading received' for name, r in readings.items() if r is None})
     present = [check_reading(r) for r in readings.values() if r is not None]
     fresh = _leave_out_stale(present, config, left_out)
     fresh = _leave_out_clock_outliers(fresh, config, left_out)

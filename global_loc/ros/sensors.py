@@ -236,15 +236,10 @@ def make_view(inputs: SensorInputs, newest: dict, since: float, mount: Callable,
         except (ScanError, Mount3DError) as e:     # ViewError, CloudError-as-ViewError, NoMounting
             reasons[spec.topic] = inputs.problems[spec.topic] = f'{type(e).__name__}: {e}'
     try:
-        view = merge_view(readings, odometry, config=config) if readings else None
+        view = merge_view(readings, odometry, config=config, unread=reasons)
     except ViewError as e:
-        reasons['view'] = str(e)
-        view = None
-    if view is None:
-        text = '; '.join(f'{topic}: {why}' for topic, why in reasons.items())
-        inputs.last_view = f'no view: {text}'
-        raise ViewError(f'no sensor gave a usable view ({text})')
-    view.left_out.update(reasons)
+        inputs.last_view = f'no view: {e}'
+        raise
     inputs.last_view = view.summary()
     return view, {topic: messages[topic] for topic in view.contributed}
 
