@@ -20,6 +20,7 @@ from global_loc.core.map_io import save_map_yaml
 from global_loc.core.newest_message import NewestMessage
 from global_loc.core.outcome import Outcome
 from global_loc.core.pose_history import PoseHistory
+from global_loc.core.request import RequestDefaults, make_request
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import (
     pose_from_msg,
@@ -29,10 +30,10 @@ from global_loc.ros.convert import (
     scan_to_msg,
     stamp_seconds,
 )
-from global_loc.ros.motion import resolve_by_motion
-from global_loc.testing.processes import TopicRecorder, isolated_env, reliable, run_client, start_server, start_sim
+from global_loc.ros.motion import MotionContext, MotionStart, resolve_by_motion
 from global_loc.sim.laser import LaserConfig
 from global_loc.sim.simulator import BASE_T_LASER, Simulator
+from global_loc.testing.processes import TopicRecorder, isolated_env, reliable, run_client, start_server, start_sim
 
 pytestmark = pytest.mark.ros   # real ROS processes (the compat run has no ROS: -m 'not ros')
 
@@ -269,6 +270,11 @@ class TurningRobot:
         self.sim.close()
 
 
+def request(**fields):
+    """A request as the server makes it, with the server's default method and angle step."""
+    return make_request(RequestDefaults('bnb', 5.0, 5.0), **fields)
+
+
 @pytest.mark.parametrize('odometry_after_s', [0.0, 0.05])
 def test_resolve_by_motion_turns_one_place_out_of_twin_aisle_ends_without_a_node(odometry_after_s):
     """Also with the odometry of every other scan arriving after it: each scan waits for
@@ -284,10 +290,10 @@ def test_resolve_by_motion_turns_one_place_out_of_twin_aisle_ends_without_a_node
     try:
         robot.thread.start()
         result, last = resolve_by_motion(
-            single, robot.first, BASE_T_LASER, 60.0, True, localizer=localizer, scans=robot.scans,
-            odometry=robot.odometry, odometry_wait_s=1.0, publish_cmd_vel=robot.twists.append,
-            rotate_speed=0.4, odom_topic='/odom', cancelled=lambda: False,
-            feedback=lambda *args: stages.append(args), log=logged.append)
+            MotionContext(robot.scans, robot.odometry, robot.twists.append, '/odom', logged.append),
+            MotionStart(single, robot.first, BASE_T_LASER, localizer),
+            request(resolve_by_motion_s=60.0, rotate_in_place=True, timeout_s=1.0), 0.4, lambda: False,
+            lambda *args: stages.append(args))
     finally:
         robot.close()
     assert result.outcome == Outcome.LOCALIZED and result.message.startswith('localized by motion'), result.message
@@ -305,10 +311,10 @@ def test_resolve_by_motion_without_odometry_says_so_and_does_not_move():
         localizer = Localizer(m)
         single = localizer.localize(scan_from_msg(robot.first), base_T_laser=BASE_T_LASER)
         result, last = resolve_by_motion(
-            single, robot.first, BASE_T_LASER, 5.0, True, localizer=localizer, scans=robot.scans,
-            odometry=PoseHistory(), odometry_wait_s=0.5, publish_cmd_vel=robot.twists.append,
-            rotate_speed=0.4, odom_topic='/wheel_odom', cancelled=lambda: False, feedback=lambda *a: None,
-            log=lambda s: None)
+            MotionContext(robot.scans, PoseHistory(), robot.twists.append, '/wheel_odom', lambda s: None),
+            MotionStart(single, robot.first, BASE_T_LASER, localizer),
+            request(resolve_by_motion_s=5.0, rotate_in_place=True, timeout_s=0.5), 0.4, lambda: False,
+            lambda *a: None)
     finally:
         robot.close()
     assert result.outcome == Outcome.AMBIGUOUS and last is robot.first

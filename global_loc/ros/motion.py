@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from dataclasses import dataclass
 from typing import Callable
 
 from geometry_msgs.msg import Twist, Vector3
@@ -48,25 +49,45 @@ class OdometryAtStamp:
         return self.odometry.at(stamp)
 
 
-def resolve_by_motion(result: LocalizationResult, first_msg, base_T_laser: Rigid2D, duration_s: float,
-                      rotate_in_place: bool, *, localizer, scans: NewestMessage, odometry: PoseHistory,
-                      odometry_wait_s: float, publish_cmd_vel: Callable[[Twist], None],
-                      rotate_speed: float, odom_topic: str, cancelled: Callable[[], bool], feedback,
-                      log: Callable[[str], None]) -> tuple[LocalizationResult, object]:
-    """Follow `result`'s hypotheses over the scans arriving for up to `duration_s`: (the
-    winner as a localized result, or the result still ambiguous with the hypotheses left;
-    the last scan message used - the poses are the robot's at its stamp).
+@dataclass(frozen=True)
+class MotionContext:
+    """What resolving by motion needs of the server, built when it is configured."""
+    scans: NewestMessage                          # the primary laser's scans as they arrive
+    odometry: PoseHistory                         # the odometry by stamp
+    publish_cmd_vel: Callable[[Twist], None]      # the cmd_vel publisher's publish
+    odom_topic: str                               # for messages
+    log: Callable[[str], None]
 
-    `odometry_wait_s`: how long to wait for a first odometry message (a late odometry
-    source: as long as a request waits for a scan); `publish_cmd_vel(twist)`: the cmd_vel
-    publisher's publish; `feedback(progress, stage, best_score, hypotheses)` as the action's."""
+
+@dataclass(frozen=True)
+class MotionStart:
+    """Where one resolution starts: the ambiguous result, the scan message it came from and
+    that laser's mounting, the localizer that answered it."""
+    result: LocalizationResult
+    first_msg: object
+    base_T_laser: Rigid2D
+    localizer: object
+
+
+def resolve_by_motion(context: MotionContext, start: MotionStart, request, rotate_speed: float,
+                      cancelled: Callable[[], bool], feedback) -> tuple[LocalizationResult, object]:
+    """Follow the start's hypotheses over the scans arriving for up to the request's
+    resolve_by_motion_s (turning in place at `rotate_speed` when it asks): (the winner as a
+    localized result, or the result still ambiguous with the hypotheses left; the last scan
+    message used - the poses are the robot's at its stamp). A first odometry message is
+    waited for as long as the request waits for a scan (a late odometry source);
+    `feedback(progress, stage, best_score, hypotheses)` as the action's."""
+    result, first_msg, odometry = start.result, start.first_msg, context.odometry
+    duration_s, rotate_in_place, odometry_wait_s = (request.resolve_by_motion_s, request.rotate_in_place,
+                                                    request.scan_timeout_s)
+    odom_topic, log, scans, publish_cmd_vel = context.odom_topic, context.log, context.scans, context.publish_cmd_vel
     first_stamp = stamp_seconds(first_msg.header.stamp)
     if not odometry.wait_until(timeout_s=odometry_wait_s, cancelled=cancelled):
         return dataclasses.replace(result, message=f'{result.message} (no odometry on {odom_topic} within '
                                                    f'{odometry_wait_s:g} s: cannot resolve by motion)'), first_msg
     at_stamp = OdometryAtStamp(odometry, odom_topic, cancelled, log)
     start_odometry = at_stamp(first_stamp)
-    follower = HypothesisFollower(result, localizer, base_T_laser, start_odometry, first_stamp)
+    follower = HypothesisFollower(result, start.localizer, start.base_T_laser, start_odometry, first_stamp)
     log(f'resolving by motion: {len(follower.resolver.tracks)} hypotheses, up to {duration_s:.0f} s'
         + (', turning in place' if rotate_in_place else ''))
     deadline = time.monotonic() + duration_s

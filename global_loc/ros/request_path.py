@@ -29,6 +29,7 @@ from ..core.scan import ScanError, scan_to_points
 from ..core.transform import Rigid2D, format_pose
 from .convert import ended_result, result_to_msg, scan_from_msg, stamp_seconds
 from .memory import release_free_memory
+from .motion import MotionStart, resolve_by_motion
 from .sensors import SensorInputs, make_view
 
 CLOCKS_APART_S = 3600.0     # a scan stamped this far from the node's clock: use_sim_time set wrong?
@@ -47,7 +48,7 @@ class Collaborators:
     mount: Callable                              # (SensorSpec, frame) -> its Mount3D on the base (NoMounting)
     laser_mount: Callable[[str], LaserMount]     # the primary laser's frame -> its LaserMount (MountError)
     odometry: PoseHistory                        # moves each reading to the view's stamp
-    resolve_by_motion: Callable                  # (result, msg, base_T_laser, request, localizer, cancelled, feedback)
+    motion: Callable[[], object]                 # -> the ros.motion.MotionContext while configured
     publish_pose: Callable[[object], None]       # PoseWithCovarianceStamped -> initialpose_topic
     show: Callable                               # (result, scan, base_T_laser, stamp, map) -> RViz topics
     clock_now: Callable[[], float]               # the node's clock (sim time with use_sim_time), s
@@ -158,8 +159,8 @@ class RequestPath:
             mount = self.c.laser_mount(msg.header.frame_id)
         except ScanError as e:
             return dataclasses.replace(result, message=f'{result.message} (cannot resolve by motion: {e})'), shown
-        result, last = self.c.resolve_by_motion(result, msg, mount.base_T_laser, request, localizer, cancelled,
-                                                feedback)
+        result, last = resolve_by_motion(self.c.motion(), MotionStart(result, msg, mount.base_T_laser, localizer),
+                                         request, self.c.config()['rotate_speed'], cancelled, feedback)
         if last is msg:
             return result, shown
         return result, (scan_to_points(mount.upright(scan_from_msg(last))), mount.base_T_laser, last)

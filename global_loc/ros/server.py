@@ -16,6 +16,7 @@ from __future__ import annotations
 import functools
 import threading
 import time
+from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped, Twist
@@ -41,7 +42,7 @@ from ..core.outcome import Outcome
 from ..core.pose_history import PoseHistory
 from .convert import map_from_msg, pose_from_msg, stamp_seconds
 from .guards import InFlight, answer_every_change_state, guard, warn_about_peers_once
-from .motion import resolve_by_motion
+from .motion import MotionContext
 from .node_main import exit_process, run_node
 from .parameters import BY_NAME, ConfigError, apply_live, check_set, declare_parameters, parameter_value, read_config
 from .request_path import Collaborators, RequestPath, goal_fields, publish_feedback, trigger_message
@@ -73,12 +74,13 @@ class GlobalLocServer(LifecycleNode):
         self.watch = None
         self.mounts = None
         self.cmd_vel_pub = None
+        self.motion: Optional[MotionContext] = None     # while configured
         self.in_flight = InFlight()
         self.guarded = functools.partial(guard, errors=self.errors, logger=self.get_logger())
         self.path = RequestPath(Collaborators(
             config=lambda: self.config, maps=self.maps, sensors=self.sensors,
             mount=lambda spec, frame: self.mounts.mount(spec, frame), laser_mount=self.laser_mount,
-            odometry=self.odom_history, resolve_by_motion=self.resolve_by_motion,
+            odometry=self.odom_history, motion=lambda: self.motion,
             publish_pose=lambda msg: self.pubs['initialpose'].publish(msg), show=self.show,
             clock_now=lambda: self.get_clock().now().nanoseconds * 1e-9, logger=self.get_logger()))
         self.add_on_set_parameters_callback(self.on_set_parameters)
@@ -137,6 +139,8 @@ class GlobalLocServer(LifecycleNode):
                      'status': self.create_lifecycle_publisher(String, '~/status', 10),
                      'diagnostics': self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics', 10)}
         self.cmd_vel_pub = self.create_publisher(Twist, config['cmd_vel_topic'], 10)
+        self.motion = MotionContext(self.scans, self.odom_history, self.cmd_vel_pub.publish, config['odom_topic'],
+                                    self.get_logger().info)
         self.watch = HealthWatch(config.supervisor, config['map_frame'], self.fit_at, self.odom_history,
                                  self.pubs['status'].publish, self.pubs['diagnostics'].publish,
                                  lambda: self.get_clock().now().to_msg(), self.get_logger(), self.get_name(),
@@ -180,6 +184,7 @@ class GlobalLocServer(LifecycleNode):
         if self.cmd_vel_pub is not None:
             self.destroy_publisher(self.cmd_vel_pub)
         self.pubs, self.subs, self.own_timers, self.cmd_vel_pub, self.config = {}, [], [], None, None
+        self.motion = None
         self.maps.clear('no map loaded (cleaned up)')
         self.path.inactive_reason = 'not active: cleaned up (configure it again)'
         self.get_logger().info('cleaned up: map dropped')
@@ -283,14 +288,6 @@ class GlobalLocServer(LifecycleNode):
             result = self.path.serve(fields, 'relocalization')
         self.get_logger().info(f'relocalization: {Outcome(result.outcome).label}: {result.message}')
         self.watch.finished(Outcome(result.outcome), published=bool(result.success))
-
-    def resolve_by_motion(self, result, msg, base_T_laser, request, localizer, cancelled, feedback):
-        c = self.config
-        return resolve_by_motion(
-            result, msg, base_T_laser, request.resolve_by_motion_s, request.rotate_in_place, localizer=localizer,
-            scans=self.scans, odometry=self.odom_history, odometry_wait_s=request.scan_timeout_s,
-            publish_cmd_vel=self.cmd_vel_pub.publish, rotate_speed=c['rotate_speed'], odom_topic=c['odom_topic'],
-            cancelled=cancelled, feedback=feedback, log=self.get_logger().info)
 
     def show(self, result, points, base_T_laser, stamp, occupancy_map) -> None:
         """The RViz topics for this localization."""
