@@ -9,7 +9,7 @@ from global_loc.core.pose_history import PoseHistory
 from global_loc.core.supervisor import SupervisorConfig
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import pose_with_covariance
-from global_loc.ros.watch import HealthWatch
+from global_loc.ros.watch import HealthWatch, WatchOutputs
 
 pytestmark = pytest.mark.ros     # ROS message types (no node, no process)
 
@@ -34,8 +34,8 @@ def make_watch(fits, **config):
     clock, logger, statuses, odometry = Clock(), Logger(), [], PoseHistory()
     odometry.add(0.0, Rigid2D())
     watch = HealthWatch(SupervisorConfig(**config), 'map', lambda msg, pose: fits.pop(0), odometry,
-                        lambda msg: statuses.append(msg.data), lambda array: None, lambda: Time(), logger, 'test',
-                        clock=clock)
+                        WatchOutputs(lambda msg: statuses.append(msg.data), lambda array: None, lambda: Time(), logger,
+                                     'test'), clock=clock)
     return watch, clock, statuses, logger
 
 

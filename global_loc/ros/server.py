@@ -48,7 +48,7 @@ from .parameters import BY_NAME, ConfigError, apply_live, check_set, declare_par
 from .request_path import Collaborators, RequestPath, goal_fields, publish_feedback, trigger_message
 from .rviz import hypotheses_msg, local_map_msg, markers_msg
 from .sensors import SensorInputs, SensorMounts, laser_fit, subscribe
-from .watch import HealthWatch
+from .watch import HealthWatch, WatchOutputs
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 # /initialpose: reliable and volatile, as AMCL subscribes it (a transient-local pose would
@@ -141,11 +141,10 @@ class GlobalLocServer(LifecycleNode):
         self.cmd_vel_pub = self.create_publisher(Twist, config['cmd_vel_topic'], 10)
         self.motion = MotionContext(self.scans, self.odom_history, self.cmd_vel_pub.publish, config['odom_topic'],
                                     self.get_logger().info)
-        self.watch = HealthWatch(config.supervisor, config['map_frame'], self.fit_at, self.odom_history,
-                                 self.pubs['status'].publish, self.pubs['diagnostics'].publish,
-                                 lambda: self.get_clock().now().to_msg(), self.get_logger(), self.get_name(),
-                                 extra_values=lambda: {**{f'errors.{k}': n for k, n in self.errors.items()},
-                                                       **self.sensors.diagnostics()})
+        self.watch = HealthWatch(config.supervisor, config['map_frame'], self.fit_at, self.odom_history, WatchOutputs(
+            self.pubs['status'].publish, self.pubs['diagnostics'].publish, lambda: self.get_clock().now().to_msg(),
+            self.get_logger(), self.get_name(), extra_values=lambda: {
+                **{f'errors.{k}': n for k, n in self.errors.items()}, **self.sensors.diagnostics()}))
         self.subs = subscribe(self, config.sensors, self.sensors, self.scans, self.guarded, g) + [
                      self.create_subscription(Odometry, config['odom_topic'], self.guarded(self.on_odom), 20,
                                               callback_group=g),

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 from typing import Callable, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -32,14 +33,22 @@ NOT_COUNTED = {Outcome.NO_SCAN, Outcome.NOT_ACTIVE, Outcome.CANCELED, Outcome.BU
 FitFn = Callable[[object, Rigid2D], Optional[float]]
 
 
+@dataclass(frozen=True)
+class WatchOutputs:
+    """Where the watch says what it sees."""
+    publish_status: Callable[[String], None]               # ~/status
+    publish_diagnostics: Callable[[DiagnosticArray], None]  # /diagnostics
+    now_msg: Callable[[], object]                          # the node's clock as a stamp
+    logger: object
+    name: str                                              # the diagnostics' hardware_id
+    extra_values: Callable[[], dict] = dict                # more key/values for /diagnostics
+
+
 class HealthWatch:
     def __init__(self, config: SupervisorConfig, map_frame: str, fit: FitFn, odometry: PoseHistory,
-                 publish_status: Callable[[String], None], publish_diagnostics: Callable[[DiagnosticArray], None],
-                 now_msg: Callable[[], object], logger, name: str, extra_values: Callable[[], dict] = dict,
-                 clock: Callable[[], float] = time.monotonic):
+                 outputs: WatchOutputs, clock: Callable[[], float] = time.monotonic):
         self.config, self.map_frame, self.fit, self.odometry = config, map_frame, fit, odometry
-        self.publish_status, self.publish_diagnostics, self.now_msg = publish_status, publish_diagnostics, now_msg
-        self.logger, self.name, self.extra_values, self.clock = logger, name, extra_values, clock
+        self.out, self.logger, self.clock = outputs, outputs.logger, clock
         self.lock = threading.Lock()
         self.supervisor = Supervisor(config, clock())
         self.belief: Optional[tuple[Rigid2D, float]] = None      # (localizer's pose, its stamp)
@@ -115,12 +124,12 @@ class HealthWatch:
             s = self.supervisor
             health, fit, note, attempts = s.health, s.fit, s.note, s.attempts
         text = health.value + ('' if fit is None else f' fit={fit:.2f}') + (f' ({note})' if note else '')
-        self.publish_status(String(data=text))
+        self.out.publish_status(String(data=text))
         status = DiagnosticStatus(level=LEVELS.get(health, DiagnosticStatus.WARN), name='global_loc: localization',
-                                  message=text, hardware_id=self.name)
+                                  message=text, hardware_id=self.out.name)
         values = {'state': health.value, 'fit': '' if fit is None else f'{fit:.3f}',
-                  'relocalizations': str(attempts), **self.extra_values()}
+                  'relocalizations': str(attempts), **self.out.extra_values()}
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         array = DiagnosticArray(status=[status])
-        array.header.stamp = self.now_msg()
-        self.publish_diagnostics(array)
+        array.header.stamp = self.out.now_msg()
+        self.out.publish_diagnostics(array)
