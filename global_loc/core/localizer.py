@@ -232,9 +232,11 @@ class Localizer:
         scored_by_tracker = matcher is tracker or raw is not None
         if verdict.success and cfg.mirror_check and points.beams and scored_by_tracker:
             unbounded = dataclasses.replace(options, region=None)      # the mirror image may fit anywhere
-            mirror = mirror_verdict(tracker, points, candidates[0], check_options(
-                unbounded, cfg.max_search_s - (time.perf_counter() - t0)), scaled(progress, 1.0, 1.0))
-            verdict = mirror or verdict
+            searched = getattr(found.stats, 'expansions', 0)
+            mirror, note = mirror_verdict(tracker, points, candidates[0], check_options(
+                unbounded, cfg.max_search_s - (time.perf_counter() - t0)), searched, scaled(progress, 1.0, 1.0))
+            verdict = mirror or (dataclasses.replace(verdict, message=f'{verdict.message} ({note})') if note
+                                 else verdict)
         return found, candidates, verdict, raw
 
     def localize_points(self, points: ScanPoints, method: Optional[str] = None,

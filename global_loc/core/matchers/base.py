@@ -107,6 +107,9 @@ class MatchOptions:
     # prune below its band from the start and return only the places that come that close -
     # a check that no place beats a known one costs a fraction of finding the best.
     incumbent: float = 0.0
+    # Node expansions an exhaustive search may spend (0: its own budget, bnb.max_nodes): a
+    # check beside the search gets less.
+    max_nodes: int = 0
 
 
 class Matcher(ABC):

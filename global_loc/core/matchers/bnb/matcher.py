@@ -111,6 +111,7 @@ class BranchAndBoundMatcher(Matcher):
     def match(self, points: ScanPoints, options: MatchOptions, progress: Optional[ProgressFn] = None) -> Match:
         opt = self.options
         deadline = time.monotonic() + options.max_search_s
+        max_nodes = options.max_nodes or opt.max_nodes
         pts = self.prepare(points.points)
         if len(pts) < 3:
             return Match([])
@@ -132,14 +133,14 @@ class BranchAndBoundMatcher(Matcher):
         search_start = time.perf_counter()
         bounds = node_bounds(self.stack.planes, tables, tu, tv, ta, top)
         run = self.searcher.run(self.stack.planes, tables, self.stack.free, space,
-                                np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, opt.max_nodes, progress,
+                                np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, max_nodes, progress,
                                 deadline, self.settled_check(pts, d0, points),
                                 int(options.incumbent * 255 * len(pts)))
         search_s = time.perf_counter() - search_start
         leaves, expansions = run.leaves, int(run.per_level.sum())
         scores = leaves[:, 3] / (255.0 * len(pts))
         stopped = '' if run.exact or run.settled else (
-            f'stopped after {expansions} node expansions' if expansions >= opt.max_nodes
+            f'stopped after {expansions} node expansions' if expansions >= max_nodes
             else f'stopped at the {options.max_search_s:g} s search limit')
         stats = SearchStats(exact=run.exact, angles=n_angles, points=len(pts), leaves=len(scores),
                             expansions=expansions, per_level=tuple(run.per_level.tolist()), top_nodes=len(tu),
