@@ -21,9 +21,9 @@ from global_loc.core.scan import scan_to_points
 from global_loc.core.transform import CORRECT_XY_M, CORRECT_YAW_DEG, format_pose, pose_correct, pose_error
 from global_loc.plot import plot_localization
 from global_loc.ros.convert import pose_from_msg, scan_from_msg
-from global_loc.testing.processes import TopicRecorder, isolated_env, reliable, start_client, start_server, start_sim
 from global_loc.sim.raycast import sample_free_poses
 from global_loc.sim.simulator import BASE_T_LASER
+from global_loc.testing.processes import TopicRecorder, isolated_env, reliable, start_client, start_server, start_sim
 
 
 def main():

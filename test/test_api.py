@@ -20,8 +20,16 @@ from conftest import OFFICE_YAML, assert_pose_near, symmetric_room
 from global_loc.core.map_io import save_map_yaml
 from global_loc.core.outcome import Outcome, Stage
 from global_loc.ros.api import NoServer, ServerGone
-from global_loc.testing.processes import TopicRecorder, isolated_env, reliable, ros2, run_client, start_server, start_sim
 from global_loc.sim.simulator import BASE_T_LASER
+from global_loc.testing.processes import (
+    TopicRecorder,
+    isolated_env,
+    reliable,
+    ros2,
+    run_client,
+    start_server,
+    start_sim,
+)
 
 pytestmark = pytest.mark.ros   # real ROS processes
 

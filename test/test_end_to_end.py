@@ -9,8 +9,16 @@ from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from conftest import assert_pose_near
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import pose_from_msg, pose_to_msg
-from global_loc.testing.processes import TopicRecorder, isolated_env, reliable, ros2, run_client, start_server, start_sim
 from global_loc.sim.simulator import BASE_T_LASER
+from global_loc.testing.processes import (
+    TopicRecorder,
+    isolated_env,
+    reliable,
+    ros2,
+    run_client,
+    start_server,
+    start_sim,
+)
 
 pytestmark = pytest.mark.ros   # real ROS processes (the compat run has no ROS: -m 'not ros')
 
