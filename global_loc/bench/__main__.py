@@ -42,6 +42,7 @@ from .suites import (
     sim_trials,
     symmetric_maps,
 )
+from .unmapped import unmapped_trials
 from .worker import run_job, worker_init
 
 # Suites whose rows are not one localization each: the report reads them apart.
@@ -77,7 +78,8 @@ def parse_args(argv):
     parser.add_argument('--quick', action='store_true', help='few poses and maps: a few minutes')
     parser.add_argument('--suites', default='cut,sim,carmen,prior,relocalization,scaling',
                         help='comma-separated: cut, sim, carmen, prior, relocalization, scaling; and changed (a '
-                             'world changed since its map, three levels), sensors (front 180/270 deg, front + '
+                             'world changed since its map, three levels), unmapped (a map lacking the robot\'s '
+                             'surroundings: bench/unmapped.py), sensors (front 180/270 deg, front + '
                              'rear, the 3D lidar: bench/sensors.py), soak (the real server and simulator '
                              'under faults), faults (runtime changes: bench/faults.py) and follow (resolution by '
                              'motion on the real logs), not in the default set')
@@ -109,6 +111,7 @@ def build_trials(args, suites, maps, poses, notes) -> tuple[list, list, dict]:
     seeded = (('sim', 'simulating scans with pybullet', sim_trials),
               ('prior', 'simulating scans for the search-prior suite', prior_trials),
               ('changed', 'ray-casting scans in changed worlds', changed_trials),
+              ('unmapped', 'cutting the maps around the robot for the unmapped suite', unmapped_trials),
               ('sensors', 'simulating lasers and the 3D lidar for the sensors suite', sensors_trials))
     for suite, doing, make in seeded:
         if suite in suites:

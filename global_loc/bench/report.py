@@ -19,6 +19,7 @@ from .sections import faults_section, prior_section, scaling_section, soak_secti
 from .sensors import sensors_section  # noqa: E402
 from .summary import summary_section, thesis_section  # noqa: E402
 from .tables import BASELINE, group, pct, save_figure, secs, stats  # noqa: E402
+from .unmapped import unmapped_section  # noqa: E402
 
 BENCHMARKS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
                           'benchmarks')
@@ -155,6 +156,8 @@ def write_report(rows, meta, out, maps, trials) -> None:
         md += prior_section(by_suite['prior'], out)
     if 'changed' in by_suite:
         md += changed_section(by_suite['changed'], out)
+    if 'unmapped' in by_suite:
+        md += unmapped_section(by_suite['unmapped'])
     if 'sensors' in by_suite:
         md += sensors_section(by_suite['sensors'], out, plots)
     if meta.get('relocalization'):

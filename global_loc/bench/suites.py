@@ -39,6 +39,7 @@ class Trial:
     base_T_laser: Rigid2D = field(default_factory=Rigid2D)
     local_map_cells: int = 0      # suite 1: size of the cut
     region: SearchRegion | None = None   # prior suite: where the search may look
+    own_map: OccupancyMap | None = None  # unmapped suite: the trial's own map (the map cut around the pose)
 
 
 def shared_maps(shared_dir: str) -> dict[str, str]:

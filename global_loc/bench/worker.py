@@ -16,9 +16,12 @@ _LOCALIZERS = {}  # per worker process
 def run_job(job):
     """One (trial, method) localization in a worker; returns a row."""
     trial_id, trial, method = job
-    loc = _LOCALIZERS.get(trial.map_name)
-    if loc is None:
-        loc = _LOCALIZERS[trial.map_name] = Localizer(_MAPS[trial.map_name])
+    if trial.own_map is not None:      # a map of its own (the unmapped suite): built for this trial alone
+        loc = Localizer(trial.own_map)
+    else:
+        loc = _LOCALIZERS.get(trial.map_name)
+        if loc is None:
+            loc = _LOCALIZERS[trial.map_name] = Localizer(_MAPS[trial.map_name])
     row = {'trial': trial_id, 'suite': trial.suite, 'map': trial.map_name, **trial.condition, 'method': method,
            'local_map_cells': trial.local_map_cells,
            'truth': [round(v, 4) for v in trial.truth.as_tuple()]}
