@@ -128,7 +128,7 @@ def reading_of(sensor: BagSensor, message, typestore) -> SensorReading:
         raise ViewError(f'no mounting: {sensor.mounting["because"]}, and no --mount {sensor.topic} X Y Z ROLL '
                         'PITCH YAW')
     msg = typestore.deserialize_cdr(message[2], message[1])
-    return reading_from_msg(sensor.topic, sensor.msgtype == LASER_SCAN, msg, sensor.mount)
+    return reading_from_msg(sensor.topic, sensor.msgtype == LASER_SCAN, msg, lambda: sensor.mount)
 
 
 def views(sensors: list[BagSensor], messages: dict, every: int, config: ViewConfig, odometry):

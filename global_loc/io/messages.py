@@ -3,7 +3,7 @@
 ros/convert.py; both they and the offline commands read them here."""
 from __future__ import annotations
 
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -37,13 +37,17 @@ def packed_from_msg(msg) -> PackedCloud:
                        int(msg.row_step), msg.data, bool(msg.is_dense))
 
 
-def reading_from_msg(topic: str, is_scan: bool, msg, mount: Mount3D, received: Optional[float] = None) -> SensorReading:
+def reading_from_msg(topic: str, is_scan: bool, msg, mount: Callable[[], Mount3D],
+                     received: Optional[float] = None) -> SensorReading:
     """A LaserScan (`is_scan`) or PointCloud2 as one sensor's reading; ViewError (a
-    ScanError, or the cloud's CloudError said) when it is unusable."""
+    ScanError, or the cloud's CloudError said) when it is unusable. `mount()` gives the
+    sensor's mounting, asked after the message is read: a message that cannot be used says
+    so first, whether or not a mounting is known."""
     if is_scan:
-        return reading_from_scan(topic, scan_from_msg(msg), mount, received)
+        scan = scan_from_msg(msg)
+        return reading_from_scan(topic, scan, mount(), received)
     try:
         points = cloud_xyz(packed_from_msg(msg))
     except CloudError as e:
         raise ViewError(f'cloud unusable: {e}') from None
-    return SensorReading(topic, stamp_seconds(msg.header.stamp), points, mount, received=received)
+    return SensorReading(topic, stamp_seconds(msg.header.stamp), points, mount(), received=received)

@@ -214,7 +214,7 @@ class SensorInputs:
 
 def reading_of(spec: SensorSpec, arrival: float, msg, mount: Callable) -> SensorReading:
     """One message as a SensorReading; ViewError (ScanError, CloudError said) when unusable."""
-    return reading_from_msg(spec.topic, spec.kind == SCAN, msg, mount(spec, msg.header.frame_id), arrival)
+    return reading_from_msg(spec.topic, spec.kind == SCAN, msg, lambda: mount(spec, msg.header.frame_id), arrival)
 
 
 def make_view(inputs: SensorInputs, newest: dict, since: float, mount: Callable, odometry,
