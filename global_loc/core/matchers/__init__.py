@@ -10,14 +10,13 @@ from .features import FeatureMatcher, make_detector, surf_available
 from .template import ccoeff_matcher, sqdiff_matcher
 from .view_features import ViewFeatureMatcher
 
+# The thesis's feature path, one matcher per OpenCV detector (make_detector names them).
+DETECTOR_METHODS = {f'features_{d}': d for d in ('orb', 'sift', 'akaze', 'surf')}
 _FACTORIES = {
     'bnb': BranchAndBoundMatcher,
     'template_ccoeff': ccoeff_matcher,
     'template_sqdiff': sqdiff_matcher,
-    'features_orb': lambda m: FeatureMatcher(m, 'orb'),
-    'features_sift': lambda m: FeatureMatcher(m, 'sift'),
-    'features_akaze': lambda m: FeatureMatcher(m, 'akaze'),
-    'features_surf': lambda m: FeatureMatcher(m, 'surf'),
+    **{name: (lambda m, d=detector: FeatureMatcher(m, d)) for name, detector in DETECTOR_METHODS.items()},
     'features_views': ViewFeatureMatcher,
 }
 # The matcher that tracks (core.motion, the health watch) and checks a proposing matcher's
@@ -40,8 +39,8 @@ def resolve_method(name: str) -> str:
         return ALIASES[name]()
     if name not in _FACTORIES:
         raise MethodError(f'unknown method {name!r}; known: {", ".join(method_names())}')
-    if name.startswith('features_') and name != 'features_views':
-        make_detector(name.split('_', 1)[1])     # MethodError when this OpenCV build lacks it (SURF, AKAZE)
+    if name in DETECTOR_METHODS:
+        make_detector(DETECTOR_METHODS[name])     # MethodError when this OpenCV build lacks it (SURF, AKAZE)
     return name
 
 
