@@ -75,11 +75,43 @@ def rigid_fits(src: np.ndarray, dst: np.ndarray, pose_of, min_inliers: int, max_
     return sorted(candidates, key=lambda c: -c.score)
 
 
-class FeatureMatcher(Matcher):
+class LocalFeatureMatcher(Matcher):
+    """A scan's local map described by a detector and its descriptors paired with the map's,
+    the pairs fitted by sequential RANSAC (rigid_fits). A subclass says how an image is
+    prepared for the detector (`prepared`) and how descriptors are paired (`pairs`)."""
     min_score = 8           # inliers
     ratio = 0.8             # Lowe's ratio test
     max_scale_error = 0.15  # both images share the resolution: scale must be ~1
     max_hypotheses = 3
+    detector = None
+
+    def prepared(self, image: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def pairs(self, keypoints, descriptors):
+        """(src, dst): the scan's keypoints and the map pixels they are paired with; None
+        when the map has too few descriptors to pair with."""
+        raise NotImplementedError
+
+    def match(self, points, options, progress=None):
+        self.check_local_map_budget(points)
+        local = build_local_grid(points, self.map.resolution, options.closing_kernel,
+                                 max_range=self.map.diagonal_m)
+        kps, desc = self.detector.detectAndCompute(self.prepared(local.image), None)
+        if progress:
+            progress(0.3, 0.0)
+        paired = None if desc is None or len(kps) < 3 else self.pairs(kps, desc)
+        if paired is None:
+            return Match([])
+        candidates = rigid_fits(*paired, lambda affine: pose_from_match(self.map, local, affine), self.min_score,
+                                self.max_hypotheses, self.max_scale_error)
+        if progress:
+            progress(1.0, candidates[0].score if candidates else 0.0)
+        return Match(self.distinct(candidates))
+
+
+class FeatureMatcher(LocalFeatureMatcher):
+    """The thesis's path: the map image itself described, Lowe's ratio test."""
 
     def __init__(self, occupancy_map, detector_name: str):
         super().__init__(occupancy_map)
@@ -97,21 +129,13 @@ class FeatureMatcher(Matcher):
             self.flann.train()
         self.map_points = np.float32([kp.pt for kp in self.keypoints]).reshape(-1, 2)
 
-    def match(self, points, options, progress=None):
-        self.check_local_map_budget(points)
-        local = build_local_grid(points, self.map.resolution, options.closing_kernel,
-                                 max_range=self.map.diagonal_m)
-        kps, desc = self.detector.detectAndCompute(soften(local.image), None)
-        if progress:
-            progress(0.3, 0.0)
-        if desc is None or len(kps) < 3 or len(self.keypoints) < 3:
-            return Match([])
-        pairs = self.flann.knnMatch(desc, k=2)
+    def prepared(self, image):
+        return soften(image)
+
+    def pairs(self, keypoints, descriptors):
+        if len(self.keypoints) < 3:
+            return None
+        pairs = self.flann.knnMatch(descriptors, k=2)
         good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < self.ratio * p[1].distance]
-        src = np.float32([kps[m.queryIdx].pt for m in good]).reshape(-1, 2)
-        dst = self.map_points[[m.trainIdx for m in good]].reshape(-1, 2)
-        candidates = rigid_fits(src, dst, lambda affine: pose_from_match(self.map, local, affine), self.min_score,
-                                self.max_hypotheses, self.max_scale_error)
-        if progress:
-            progress(1.0, candidates[0].score if candidates else 0.0)
-        return Match(self.distinct(candidates))
+        return (np.float32([keypoints[m.queryIdx].pt for m in good]).reshape(-1, 2),
+                self.map_points[[m.trainIdx for m in good]].reshape(-1, 2))

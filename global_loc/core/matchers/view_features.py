@@ -10,7 +10,8 @@ and its SIFT keypoints kept at their map pixels. A scan's local map is described
 way; each of its descriptors is matched to the nearest map descriptor that stands clear of
 the next one *from another place* (Lowe's ratio test, among places: the same corner seen
 from two viewpoints is one place, not an ambiguity), and sequential RANSAC fits rigid
-poses (features.rigid_fits). A fast proposer: the Localizer checks its hypotheses on the map.
+poses (features.LocalFeatureMatcher, as the thesis's path). A fast proposer: the
+Localizer checks its hypotheses on the map.
 Measured on 20 simulated 270°/20 m scans: the best fit right (< 0.5 m) on 6-8 of 20 at the
 office, 13 of 20 at building_31; 7-17 ms a scan; built in 2 s (office) and 18 s (building_31).
 """
@@ -21,11 +22,9 @@ import math
 import cv2
 import numpy as np
 
-from ..local_grid import build_local_grid, wall_field
+from ..local_grid import wall_field
 from ..pixel_kernels import first_hits
-from ..pose import pose_from_match
-from .base import Match, Matcher
-from .features import rigid_fits
+from .features import LocalFeatureMatcher
 
 VIEW_SPACING_M = 1.0
 CLEARANCE_M = 0.3
@@ -60,12 +59,9 @@ def view_image(hits_px: np.ndarray, u: int, v: int, angles: np.ndarray, pad: int
     return cv2.morphologyEx(image, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)), (x0, y0)
 
 
-class ViewFeatureMatcher(Matcher):
+class ViewFeatureMatcher(LocalFeatureMatcher):
+    """Descriptors of the map's views; Lowe's ratio test among places."""
     name = 'features_views'
-    min_score = 8            # inliers
-    ratio = 0.8              # Lowe's ratio test, among places
-    max_scale_error = 0.15
-    max_hypotheses = 3
 
     def __init__(self, occupancy_map):
         super().__init__(occupancy_map)
@@ -80,7 +76,7 @@ class ViewFeatureMatcher(Matcher):
             if not np.isfinite(view_hits).any():
                 continue
             image, (x0, y0) = view_image(view_hits, int(u), int(v), angles)
-            kps, desc = self.detector.detectAndCompute(wall_field(image, FIELD_REACH_PX), None)
+            kps, desc = self.detector.detectAndCompute(self.prepared(image), None)
             if desc is not None:
                 points += [(kp.pt[0] + x0, kp.pt[1] + y0) for kp in kps]
                 descriptors.append(desc)
@@ -91,16 +87,14 @@ class ViewFeatureMatcher(Matcher):
             self.flann.add([np.vstack(descriptors)])
             self.flann.train()
 
-    def match(self, points, options, progress=None):
-        self.check_local_map_budget(points)
-        local = build_local_grid(points, self.map.resolution, options.closing_kernel, max_range=self.map.diagonal_m)
-        kps, desc = self.detector.detectAndCompute(wall_field(local.image, FIELD_REACH_PX), None)
-        if progress:
-            progress(0.3, 0.0)
-        if desc is None or len(kps) < 3 or len(self.map_points) < NEIGHBOURS:
-            return Match([])
+    def prepared(self, image):
+        return wall_field(image, FIELD_REACH_PX)
+
+    def pairs(self, keypoints, descriptors):
+        if len(self.map_points) < NEIGHBOURS:
+            return None
         src, dst = [], []
-        for neighbours in self.flann.knnMatch(desc, k=NEIGHBOURS):
+        for neighbours in self.flann.knnMatch(descriptors, k=NEIGHBOURS):
             if not neighbours:
                 continue
             best = neighbours[0]
@@ -108,11 +102,6 @@ class ViewFeatureMatcher(Matcher):
             other = next((n for n in neighbours[1:]
                           if np.hypot(*(self.map_points[n.trainIdx] - at)) > SAME_PLACE_PX), None)
             if other is None or best.distance < self.ratio * other.distance:
-                src.append(kps[best.queryIdx].pt)
+                src.append(keypoints[best.queryIdx].pt)
                 dst.append(at)
-        candidates = rigid_fits(np.float32(src).reshape(-1, 2), np.float32(dst).reshape(-1, 2),
-                                lambda affine: pose_from_match(self.map, local, affine), self.min_score,
-                                self.max_hypotheses, self.max_scale_error)
-        if progress:
-            progress(1.0, candidates[0].score if candidates else 0.0)
-        return Match(self.distinct(candidates))
+        return np.float32(src).reshape(-1, 2), np.float32(dst).reshape(-1, 2)
