@@ -123,7 +123,7 @@ def observations(frames: list[Frame], start: int, bounds: FollowBounds, end: Opt
         elif frame.odometry is None:
             continue
         else:
-            travelled += math.hypot(*(last.inverse() * frame.odometry).as_tuple()[:2]) if last is not None else 0.0
+            travelled += last.distance_to(frame.odometry)[0] if last is not None else 0.0
             last = frame.odometry
             reason = 'distance' if travelled > bounds.metres else 'scans' if count >= bounds.scans else ''
         if reason:
