@@ -28,7 +28,7 @@ setup(
             'server = global_loc.ros.server:main',
             'test_global_loc = global_loc.ros.client:main',
             'sim = global_loc.ros.sim_node:main',
-            'localize = global_loc.cli:main',
+            'localize = global_loc.offline.cli:main',
         ],
     },
 )

@@ -1,6 +1,6 @@
 """`python -m global_loc`: the command line (see cli.py)."""
 import sys
 
-from .cli import main
+from .offline.cli import main
 
 sys.exit(main())

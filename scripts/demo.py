@@ -19,7 +19,7 @@ from global_loc.core.map_io import load_map_yaml
 from global_loc.core.paths import default_map_yaml
 from global_loc.core.scan import scan_to_points
 from global_loc.core.transform import CORRECT_XY_M, CORRECT_YAW_DEG, format_pose, pose_correct, pose_error
-from global_loc.plot import plot_localization
+from global_loc.offline.plot import plot_localization
 from global_loc.ros.convert import pose_from_msg, scan_from_msg
 from global_loc.sim.raycast import sample_free_poses
 from global_loc.sim.simulator import BASE_T_LASER

@@ -1,4 +1,4 @@
-"""The ROS boundary: every module of global_loc/core, global_loc/io and global_loc/sim imports with
+"""The ROS boundary: every module of global_loc/core, io, offline (the command line) and sim imports with
 rclpy, every *_msgs package and global_loc_interfaces made unimportable."""
 import pkgutil
 import subprocess
@@ -6,6 +6,7 @@ import sys
 
 import global_loc.core
 import global_loc.io
+import global_loc.offline
 import global_loc.sim
 
 BLOCKER = '''
@@ -31,8 +32,10 @@ def modules_of(package) -> list[str]:
 
 
 def test_core_and_simulator_import_without_ros():
-    names = modules_of(global_loc.core) + modules_of(global_loc.io) + modules_of(global_loc.sim)
+    names = (modules_of(global_loc.core) + modules_of(global_loc.io) + modules_of(global_loc.offline)
+             + modules_of(global_loc.sim))
     assert 'global_loc.core.matchers.bnb.verdict' in names and 'global_loc.sim.simulator' in names
+    assert 'global_loc.offline.cli' in names
     out = subprocess.run([sys.executable, '-c', BLOCKER, *names], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == f'imported {len(names)}'

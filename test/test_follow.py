@@ -259,7 +259,7 @@ def test_a_follow_is_bounded_by_distance_and_scans_when_stamps_stop_advancing():
     """Stamps that stop advancing (a real log's wrap to one value) end no time window: the
     distance driven and the scan count bound it, and the bound that ended it is said."""
     from global_loc.core.scan import Scan
-    from global_loc.offline_follow import FollowBounds, Frame, observations, stamps_not_advancing
+    from global_loc.offline.follow import FollowBounds, Frame, observations, stamps_not_advancing
     scan = Scan(-math.pi / 2, math.radians(1.0), 0.0, 8.0, np.full(181, 2.0), 0.0)
     frames = [Frame(i, dataclasses.replace(scan, stamp=min(i, 3) * 0.1), Rigid2D(0.1 * i, 0.0, 0.0),
                     where=f' (line {i + 1})') for i in range(400)]

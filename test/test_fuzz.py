@@ -16,12 +16,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from conftest import small_room
-from global_loc.cli import json_line_scans
 from global_loc.core.localizer import Localizer, LocalizerConfig
 from global_loc.core.map_io import MapError, from_occupancy_grid, load_map_yaml
 from global_loc.core.scan import Scan, ScanError, scan_to_points
 from global_loc.core.search_region import SearchRegion
 from global_loc.core.transform import Rigid2D
+from global_loc.offline.cli import json_line_scans
 
 FUZZ = settings(derandomize=True, database=None, deadline=None, max_examples=60,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])

@@ -265,7 +265,7 @@ def test_a_prior_tighter_than_the_search_centred_on_the_truth_localizes_and_says
                                   ('--laser-x', '1e9'), ('--bnb-sigma-cells', '0'), ('--bnb-max-points', '0'),
                                   ('--bnb-max-range', '0'), ('--bnb-keep-ratio', 'nan')])
 def test_the_cli_refuses_a_laser_or_bnb_flag_outside_the_servers_range(tmp_path, capsys, flag):
-    from global_loc.cli import main
+    from global_loc.offline.cli import main
     scans = tmp_path / 'scans.jsonl'
     scans.write_text(json.dumps({**simulate_scan(small_room(), Rigid2D(2.0, 2.0, 0.3), 270, 541, 10.0).to_dict()})
                      + '\n')

@@ -90,7 +90,7 @@ def test_closing_joins_a_dotted_wall_into_a_line_and_zero_kernel_is_off():
 
 
 def test_the_cli_names_the_closing_by_what_it_does_and_keeps_the_thesiss_name():
-    from global_loc.cli import build_parser
+    from global_loc.offline.cli import build_parser
     for flag in ('--closing-kernel', '--opening-kernel'):     # the ROS parameter is opening_kernel
         args = build_parser().parse_args(['localize', '--scans', 'scans.jsonl', flag, '5'])
         assert args.closing_kernel == 5

@@ -41,7 +41,7 @@ def test_a_right_template_answer_stays_right_and_confident_once_checked(office_s
 
 
 def test_the_cli_prints_the_raw_verdict_and_no_verify_gives_the_thesis_answer(office_scans, tmp_path, capsys):
-    from global_loc.cli import main
+    from global_loc.offline.cli import main
     _, scans = office_scans
     path = tmp_path / 'scans.jsonl'
     path.write_text(json.dumps({**scans[1][0].to_dict(), 'truth': scans[1][1].as_dict()}) + '\n')

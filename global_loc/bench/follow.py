@@ -1,5 +1,5 @@
 """The `follow` suite: the server's resolution by motion on the real CARMEN logs, as
-`localize --carmen LOG --follow` runs it (offline_follow.follow_start). A start scan
+`localize --carmen LOG --follow` runs it (offline/follow.py `follow_start`). A start scan
 (seeded, among those the map explains) is localized in a map (5 cm) built from every scan
 of the log except those within FOLLOW_S seconds of it, before or after - so neither the
 start scan nor any scan it is followed over is in the map, while the places they see are
@@ -17,7 +17,7 @@ import numpy as np
 from ..core.localizer import Localizer
 from ..core.transform import CORRECT_XY_M, CORRECT_YAW_DEG, Rigid2D
 from ..io.carmen import GridCounts, LogGrid, read_flaser
-from ..offline_follow import FollowBounds, Frame, follow_start
+from ..offline.follow import FollowBounds, Frame, follow_start
 from .carmen import explained_fraction
 from .tables import group, pct, secs
 

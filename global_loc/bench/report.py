@@ -12,7 +12,7 @@ import numpy as np  # noqa: E402
 
 from ..core.scan import scan_to_points  # noqa: E402
 from ..core.transform import Rigid2D  # noqa: E402
-from ..plot import plot_localization  # noqa: E402
+from ..offline.plot import plot_localization  # noqa: E402
 from .changed import changed_section  # noqa: E402
 from .follow import follow_section  # noqa: E402
 from .sections import faults_section, prior_section, scaling_section, soak_section  # noqa: E402

@@ -18,16 +18,12 @@ import time
 from dataclasses import dataclass
 from typing import Optional
 
-from .bagfile import BagError
-from .core.localizer import LocalizationResult
-from .core.motion import HypothesisFollower, Observation
-from .core.outcome import Outcome
-from .core.pose_history import PoseHistory
-from .core.scan import Scan, ScanError, scan_to_points
-from .core.transform import Rigid2D, pose_error
-from .io.messages import pose_from_msg, stamp_seconds
-
-ODOMETRY = 'nav_msgs/msg/Odometry'
+from ..core.localizer import LocalizationResult
+from ..core.motion import HypothesisFollower, Observation
+from ..core.outcome import Outcome
+from ..core.pose_history import PoseHistory
+from ..core.scan import Scan, ScanError, scan_to_points
+from ..core.transform import Rigid2D, pose_error
 
 
 @dataclass
@@ -67,34 +63,10 @@ def stamps_not_advancing(frames: list[Frame]) -> Optional[str]:
             f'{b.scan.stamp:.6f} after {a.scan.stamp:.6f}. Following is also bounded by distance and scan count')
 
 
-def read_odometry(path: str, topic: str) -> list[tuple[float, Rigid2D]]:
-    """(stamp, base pose) of each of the nav_msgs/Odometry messages on `topic`, by header stamp."""
-    from rosbags.rosbag2 import Reader
-    from rosbags.typesys import Stores, get_typestore
-    try:
-        reader = Reader(path)
-        reader.open()
-    except Exception as e:      # rosbags raises several types for a missing or malformed recording
-        raise BagError(f'{path}: not a readable rosbag2 recording ({type(e).__name__}: {e})') from None
-    try:
-        connections = [c for c in reader.connections if c.topic == topic]
-        if not connections or any(c.msgtype != ODOMETRY for c in connections):
-            found = ', '.join(sorted({f'{c.topic} ({c.msgtype})' for c in reader.connections})) or 'none'
-            raise BagError(f'{path}: no {ODOMETRY} on {topic} (--odom-topic); the recording has: {found}')
-        typestore = get_typestore(Stores.ROS2_JAZZY)
-        poses = []
-        for connection, _, raw in reader.messages(connections=connections):
-            msg = typestore.deserialize_cdr(raw, connection.msgtype)
-            poses.append((stamp_seconds(msg.header.stamp), pose_from_msg(msg.pose.pose)))
-    finally:
-        reader.close()
-    return sorted(poses, key=lambda stamped: stamped[0])
-
-
 def bag_frames(path: str, scan_topic: str, odom_topic: str) -> list[Frame]:
     """Every LaserScan of the recording with the odometry interpolated at its stamp (None
     outside the odometry's span: a pose there would be a guess)."""
-    from .bagfile import read_scans
+    from ..io.bag import read_odometry, read_scans
     odometry = read_odometry(path, odom_topic)
     history = PoseHistory(keep_s=math.inf)
     for stamp, pose in odometry:
@@ -107,7 +79,7 @@ def bag_frames(path: str, scan_topic: str, odom_topic: str) -> list[Frame]:
 def carmen_frames(path: str) -> list[Frame]:
     """Every FLASER scan of a CARMEN log with its raw odometry and corrected pose (laser poses:
     the base is the laser)."""
-    from .io.carmen import read_flaser
+    from ..io.carmen import read_flaser
     return [Frame(i, r.scan, r.odometry, r.pose, f' (line {r.line})') for i, r in enumerate(read_flaser(path))]
 
 
@@ -193,7 +165,7 @@ def start_indices(frames: list[Frame], every: int) -> list[int]:
 def carmen_map(path: str):
     """The occupancy map of a CARMEN log built from all its scans at their corrected poses
     (5 cm): the map a user of `--carmen` without `--map` localizes in."""
-    from .io.carmen import LogGrid, read_flaser
+    from ..io.carmen import LogGrid, read_flaser
     records = read_flaser(path)
     grid = LogGrid(records, 0.05)
     return grid.occupancy_map(grid.counts(records), f'{path} (built from its scans)')

@@ -23,20 +23,21 @@ from dataclasses import dataclass
 
 from rosbags.typesys import Stores, get_typestore
 
-from .bagfile import (
+from ..core.mount3d import Mount3D, Mount3DError
+from ..core.outcome import Outcome
+from ..core.pose_history import PoseHistory
+from ..core.scan import ScanError
+from ..core.view import SensorReading, ViewConfig, ViewError, merge_view
+from ..io.bag import (
     LASER_SCAN,
     BagError,
     MountingNotFound,
     open_bag,
     read_mountings,
+    read_odometry,
     scan_connections,
 )
-from .core.mount3d import Mount3D, Mount3DError
-from .core.outcome import Outcome
-from .core.pose_history import PoseHistory
-from .core.scan import ScanError
-from .core.view import SensorReading, ViewConfig, ViewError, merge_view
-from .io.messages import reading_from_msg, stamp_seconds
+from ..io.messages import reading_from_msg, stamp_seconds
 
 POINT_CLOUD2 = 'sensor_msgs/msg/PointCloud2'
 
@@ -111,7 +112,6 @@ def read_stamps(path: str, sensors: list[BagSensor]) -> dict:
 
 def bag_odometry(path: str, topic: str) -> tuple[PoseHistory | None, str]:
     """The recording's odometry as a PoseHistory, or None and why not."""
-    from .offline_follow import read_odometry
     try:
         poses = read_odometry(path, topic)
     except BagError as e:

@@ -11,13 +11,14 @@ import numpy as np
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
-from .core.mount import LaserMount, MountError
-from .core.mount3d import Mount3D
-from .core.scan import Scan
-from .core.transform import Rigid2D
-from .io.messages import scan_from_msg
+from ..core.mount import LaserMount, MountError
+from ..core.mount3d import Mount3D
+from ..core.scan import Scan
+from ..core.transform import Rigid2D
+from .messages import pose_from_msg, scan_from_msg, stamp_seconds
 
 LASER_SCAN = 'sensor_msgs/msg/LaserScan'
+ODOMETRY = 'nav_msgs/msg/Odometry'
 TF_MESSAGE = 'tf2_msgs/msg/TFMessage'
 TF_TOPICS = ('/tf_static', '/tf')
 # A /tf transform whose translation and rotation stay within these over the whole
@@ -78,6 +79,24 @@ def read_scans(path: str, topic: str, every: int = 1) -> Iterator[tuple[int, Sca
             yield index, scan_from_msg(typestore.deserialize_cdr(raw, connection.msgtype))
     finally:
         reader.close()
+
+
+def read_odometry(path: str, topic: str) -> list[tuple[float, Rigid2D]]:
+    """(stamp, base pose) of each of the nav_msgs/Odometry messages on `topic`, by header stamp."""
+    reader = open_bag(path)
+    try:
+        connections = [c for c in reader.connections if c.topic == topic]
+        if not connections or any(c.msgtype != ODOMETRY for c in connections):
+            found = ', '.join(sorted({f'{c.topic} ({c.msgtype})' for c in reader.connections})) or 'none'
+            raise BagError(f'{path}: no {ODOMETRY} on {topic} (--odom-topic); the recording has: {found}')
+        typestore = get_typestore(Stores.ROS2_JAZZY)
+        poses = []
+        for connection, _, raw in reader.messages(connections=connections):
+            msg = typestore.deserialize_cdr(raw, connection.msgtype)
+            poses.append((stamp_seconds(msg.header.stamp), pose_from_msg(msg.pose.pose)))
+    finally:
+        reader.close()
+    return sorted(poses, key=lambda stamped: stamped[0])
 
 
 def read_mounting(path: str, topic: str, base_frame: str) -> BagMounting:

@@ -11,8 +11,8 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .core.map_io import OccupancyMap  # noqa: E402
-from .core.transform import Rigid2D  # noqa: E402
+from ..core.map_io import OccupancyMap  # noqa: E402
+from ..core.transform import Rigid2D  # noqa: E402
 
 
 def plot_localization(path: str, occupancy_map: OccupancyMap, points_laser: np.ndarray,

@@ -14,19 +14,19 @@ import sys
 
 import numpy as np
 
-from .core import limits
-from .core.limits import check_within
-from .core.localizer import Localizer, LocalizerConfig
-from .core.map_io import MapError, load_map_yaml
-from .core.matchers import BranchAndBoundOptions, MethodError, method_names
-from .core.matchers.bnb import option_fields
-from .core.mount import LaserMount
-from .core.outcome import Outcome
-from .core.paths import default_map_yaml
-from .core.scan import Scan, ScanError, scan_to_points
-from .core.transform import Rigid2D, pose_error
-from .core.view import ViewConfig
-from .sim.raycast import sample_free_poses, simulate_scan
+from ..core import limits
+from ..core.limits import check_within
+from ..core.localizer import Localizer, LocalizerConfig
+from ..core.map_io import MapError, load_map_yaml
+from ..core.matchers import BranchAndBoundOptions, MethodError, method_names
+from ..core.matchers.bnb import option_fields
+from ..core.mount import LaserMount
+from ..core.outcome import Outcome
+from ..core.paths import default_map_yaml
+from ..core.scan import Scan, ScanError, scan_to_points
+from ..core.transform import Rigid2D, pose_error
+from ..core.view import ViewConfig
+from ..sim.raycast import sample_free_poses, simulate_scan
 
 
 def json_line_scans(path: str):
@@ -67,7 +67,7 @@ def parse_truth(value) -> Rigid2D | None:
 def bag_scans(path: str, topic: str, every: int, mounting: dict | None = None, mount: LaserMount | None = None):
     """(where, Scan, None) per LaserScan of a rosbag2 recording, turned upright when `mount`
     is upside down; `where` carries `mounting` (where the laser's mounting came from) when given."""
-    from .bagfile import read_scans
+    from ..io.bag import read_scans
     for index, scan in read_scans(path, topic, every):
         yield {'index': index, 'stamp': round(scan.stamp, 9), **({'mounting': mounting} if mounting else {})}, \
             mount.upright(scan) if mount else scan, None
@@ -86,7 +86,7 @@ def laser_mounting(args) -> tuple[LaserMount, dict]:
     said = {'from': '--laser-x/--laser-y/--laser-yaw', **flags.base_T_laser.as_dict()}
     if not args.bag:
         return flags, said
-    from .bagfile import MountingNotFound, read_mounting
+    from ..io.bag import MountingNotFound, read_mounting
     try:
         found = read_mounting(args.bag, args.topic, args.base_frame)
     except MountingNotFound as e:
@@ -134,7 +134,7 @@ def several_sensors(args) -> bool:
 def localize_main(args) -> int:
     several = several_sensors(args)
     if args.carmen and not args.map:
-        from .offline_follow import carmen_map
+        from .follow import carmen_map
         occupancy_map = carmen_map(args.carmen)
     else:
         occupancy_map = load_map_yaml(args.map or default_map_yaml())
@@ -147,16 +147,16 @@ def localize_main(args) -> int:
     localizer = Localizer(occupancy_map, config)
     method = localizer.matcher(args.method).name   # unknown method: fail before reading any scan
     if several:
-        from .offline_view import localize_views
+        from .views import localize_views
         return localize_views(args, localizer, method, result_fields)
     if args.follow:
         if mount.upside_down:
             raise ValueError("--follow: the bag's tf mounts the laser upside down; only --bag without --follow "
                              'turns its scans upright')
-        from .offline_follow import follow_main
+        from .follow import follow_main
         return follow_main(args, localizer, base_T_laser)
     if args.carmen:
-        from .offline_follow import carmen_scans
+        from .follow import carmen_scans
         scans = carmen_scans(args.carmen, args.every)
     elif args.bag:
         scans = bag_scans(args.bag, args.topic, args.every, mounting, mount)
