@@ -30,15 +30,18 @@ def right(fields: dict) -> bool:
     return 'error_xy' in fields and fields['error_xy'] < CORRECT_XY_M and fields['error_yaw_deg'] < CORRECT_YAW_DEG
 
 
-def log_rows(log: str, path: str, starts: int, seed: int, follow_s: float) -> list[dict]:
+def log_starts(log: str, path: str, starts: int, seed: int, follow_s: float):
+    """(start index, its held-out map, the log's frames) of the seeded start scans of one log:
+    each localized in the map of every scan more than follow_s from it, its pose on free space
+    and its scan explained by that map."""
     records = read_flaser(path)
     grid = LogGrid(records, 0.05)
     total = grid.counts(records)
     stamps = np.array([r.timestamp for r in records])
     frames = [Frame(i, r.scan, r.odometry, r.pose) for i, r in enumerate(records)]
-    rows, rng = [], np.random.default_rng(seed)
+    done, rng = 0, np.random.default_rng(seed)
     for i in rng.permutation(len(records)):
-        if len(rows) == starts:
+        if done == starts:
             break
         window = grid.counts([records[j] for j in np.flatnonzero(np.abs(stamps - stamps[i]) <= follow_s)])
         m = grid.occupancy_map(GridCounts(total.hits - window.hits, total.visits - window.visits),
@@ -46,13 +49,22 @@ def log_rows(log: str, path: str, starts: int, seed: int, follow_s: float) -> li
         pose = records[i].pose
         if not m.is_free_at([[pose.x, pose.y]])[0] or explained_fraction(m, records[i]) < MIN_EXPLAINED:
             continue
-        line = follow_start(Localizer(m), frames, int(i), FollowBounds.for_seconds(follow_s), Rigid2D(), 'bnb')
-        rows.append({'suite': 'follow', 'log': log, 'index': line['index'],
-                     'single_outcome': line['single']['outcome'], 'single_ok': right(line['single']),
-                     'followed': line['followed'], 'settled': line['settled'], 'outcome': line['outcome'],
-                     'ok': right(line), **{key: line.get(key) for key in (
-                         'distance_m', 'turn_deg', 'follow_s', 'scans', 'time_s')}})
-    return rows
+        done += 1
+        yield int(i), m, frames
+
+
+def start_row(log: str, line: dict) -> dict:
+    """follow_start's line as the suite's row."""
+    return {'suite': 'follow', 'log': log, 'index': line['index'], 'single_outcome': line['single']['outcome'],
+            'single_ok': right(line['single']), 'followed': line['followed'], 'settled': line['settled'],
+            'outcome': line['outcome'], 'ok': right(line),
+            **{key: line.get(key) for key in ('distance_m', 'turn_deg', 'follow_s', 'scans', 'time_s')}}
+
+
+def log_rows(log: str, path: str, starts: int, seed: int, follow_s: float) -> list[dict]:
+    return [start_row(log, follow_start(Localizer(m), frames, i, FollowBounds.for_seconds(follow_s), Rigid2D(),
+                                        'bnb'))
+            for i, m, frames in log_starts(log, path, starts, seed, follow_s)]
 
 
 def follow_rows(shared_dir: str, starts_per_log: int, seed: int, follow_s: float = FOLLOW_S) -> list[dict]:

@@ -17,14 +17,13 @@ from .changed import changed_section  # noqa: E402
 from .follow import follow_section  # noqa: E402
 from .sections import faults_section, prior_section, scaling_section, soak_section  # noqa: E402
 from .sensors import sensors_section  # noqa: E402
-from .summary import summary_section, thesis_section  # noqa: E402
+from .summary import meaning, summary_section, thesis_section  # noqa: E402
 from .tables import BASELINE, group, pct, save_figure, secs, stats  # noqa: E402
 from .unmapped import unmapped_section  # noqa: E402
 
 BENCHMARKS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
                           'benchmarks')
 RESULTS = os.path.join(BENCHMARKS, 'results')
-READING = os.path.join(BENCHMARKS, 'READING.md')
 
 
 def method_table(rows, label_fn, label_name, methods, baseline_rows=None) -> str:
@@ -72,17 +71,16 @@ def cond_label(r):
     return c + (f' / clutter {r["clutter"]}' if r.get('clutter') else '')
 
 
-def header(rows, meta) -> list[str]:
-    """The command, the machine and what the figures mean."""
-    return [f'Command: `{meta["command"]}` — {len(rows)} localizations in {meta["wall_time_s"]} s with '
+def command_line(rows, meta) -> list[str]:
+    count = f'{len(rows)} localizations in ' if rows else ''
+    return [f'Command: `{meta["command"]}` — {count}{meta["wall_time_s"]} s with '
             f'{meta["jobs"]} worker process(es), {meta.get("threads", 1)} thread(s) each (cv2.setNumThreads: '
-            f'OpenCV\'s threads and bnb\'s search threads).', '',
-            '| machine | |', '|---|---|'] + [f'| {k} | {v} |' for k, v in meta['machine'].items()] + [''] + \
-           ['Success: position error < 0.2 m and heading error < 5° (the thesis criterion), also 0.5 m / 10°. '
-            '"Marked success but wrong": the result says `success` but misses 0.2 m / 5° (share of all trials). '
-            f'"time / baseline": median time over the thesis baseline ({BASELINE}, Δα = 5°) on the same trials '
-            'of the same run (< 1 is faster).', '',
-            'Maps: ' + ', '.join(f'{n} ({v})' for n, v in meta['maps'].items()) + '.', '']
+            f'OpenCV\'s threads and bnb\'s search threads).', '']
+
+
+def machine(meta) -> list[str]:
+    return (['| machine | |', '|---|---|'] + [f'| {k} | {v} |' for k, v in meta['machine'].items()] + [''] +
+            ['Maps: ' + ', '.join(f'{n} ({v})' for n, v in meta['maps'].items()) + '.', ''])
 
 
 def sim_section(sim, methods, out, plots: bool) -> list[str]:
@@ -139,37 +137,36 @@ def write_report(rows, meta, out, maps, trials) -> None:
     plots = trials is not None
     methods = sorted({r['method'] for r in rows}, key=lambda m: (m != BASELINE, m))
     by_suite = group(rows, lambda r: r['suite'])
-    committed = os.path.abspath(out) == RESULTS      # the hand-written reading belongs to the committed report
-    md = ['# global_loc benchmark' + (' (quick)' if meta['quick'] else ''), '']
-    md += summary_section(rows + meta.get('scaling', []), RESULTS if committed else None)
-    md += thesis_section(rows)
-    md += header(rows, meta)
-    if committed and os.path.exists(READING):
-        md += [open(READING).read(), '']
+    committed = os.path.abspath(out) == RESULTS      # the committed report also lists the suites' folders
+    sections = []
     if 'sim' in by_suite:
-        md += sim_section(by_suite['sim'], methods, out, plots)
+        sections.append(sim_section(by_suite['sim'], methods, out, plots))
     if 'cut' in by_suite:
-        md += cut_section(by_suite['cut'], methods, out, plots)
+        sections.append(cut_section(by_suite['cut'], methods, out, plots))
     if 'carmen' in by_suite:
-        md += carmen_section(by_suite['carmen'], meta.get('carmen_filters', {}), methods, out, plots)
+        sections.append(carmen_section(by_suite['carmen'], meta.get('carmen_filters', {}), methods, out, plots))
     if 'prior' in by_suite:
-        md += prior_section(by_suite['prior'], out)
+        sections.append(prior_section(by_suite['prior'], out))
     if 'changed' in by_suite:
-        md += changed_section(by_suite['changed'], out)
+        sections.append(changed_section(by_suite['changed'], out))
     if 'unmapped' in by_suite:
-        md += unmapped_section(by_suite['unmapped'])
+        sections.append(unmapped_section(by_suite['unmapped']))
     if 'sensors' in by_suite:
-        md += sensors_section(by_suite['sensors'], out, plots)
-    if meta.get('relocalization'):
-        md += relocalization_section(meta['relocalization'])
-    if meta.get('follow'):
-        md += follow_section(meta['follow'])
-    if meta.get('soak'):
-        md += soak_section(meta['soak'])
-    if meta.get('faults'):
-        md += faults_section(meta['faults'])
+        sections.append(sensors_section(by_suite['sensors'], out, plots))
+    for suite, section in (('relocalization', relocalization_section), ('follow', follow_section),
+                           ('soak', soak_section), ('faults', faults_section)):
+        if meta.get(suite):
+            sections.append(section(meta[suite]))
     if meta.get('scaling'):
-        md += scaling_section(meta['scaling'], rows, out)
+        sections.append(scaling_section(meta['scaling'], rows, out))
+    # The report opens with its table (the summary, or the one suite's own), the command that
+    # made it and what it means; the machine and the details follow.
+    lead = summary_section(rows + meta.get('scaling', []), RESULTS if committed else None) or \
+        (sections.pop(0) if sections else [])
+    md = ['# global_loc benchmark' + (' (quick)' if meta['quick'] else ''), '']
+    md += lead + command_line(rows, meta) + meaning(rows, meta) + machine(meta) + thesis_section(rows)
+    for section in sections:
+        md += section
     md += failure_pictures(rows, trials, maps, out)
     with open(os.path.join(out, 'REPORT.md'), 'w') as f:
         f.write('\n'.join(md) + '\n')

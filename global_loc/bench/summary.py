@@ -85,6 +85,7 @@ def summary_section(rows: list[dict], results_dir: str | None = None) -> list[st
              'matchers\' section).', '',
              '| suite | trials | bnb n | success | confident-wrong | median [s] | p95 [s] | thesis n | raw success '
              '| raw confident-wrong | success | confident-wrong | median [s] | p95 [s] | faster |', '|---' * 15 + '|']
+    header_lines = len(lines)
     for suite in (s for s in SUITE_TRIALS if s in by_suite):
         lines.append(summary_line(suite, by_suite[suite], ''))
         if suite == 'sim':         # the thesis's own condition apart
@@ -101,8 +102,24 @@ def summary_section(rows: list[dict], results_dir: str | None = None) -> list[st
                     lines.append(summary_line(suite, committed, f' ([run]({suite}/REPORT.md))'))
         links = [f'[{name}]({name}/REPORT.md) ({what})' for name, what in OTHER_REPORTS.items()
                  if os.path.exists(os.path.join(results_dir, name, 'REPORT.md'))]
+    if len(lines) == header_lines:       # no localization suite in this run: its own section leads
+        return []
     if links:
         lines += ['', 'Their own figures: ' + ', '.join(links) + '.']
-    if results_dir is not None and os.path.exists(os.path.join(results_dir, '..', 'DROPPED.md')):
-        lines += ['', 'Experiments measured and not kept: [DROPPED.md](../DROPPED.md).']
+    if results_dir is not None:
+        lines += ['', 'What was decided from these figures, and what was measured and dropped: the decision '
+                  'records, [docs/decisions](../../docs/decisions/README.md).']
     return lines + ['']
+
+
+def meaning(rows: list[dict], notes: dict) -> list[str]:
+    """What the run's figures are: the suites it ran, in a line each, and the criteria."""
+    suites = [s for s in SUITE_TRIALS if any(r.get('suite') == s for r in rows) or notes.get(s)]
+    suites += [s for s in OTHER_REPORTS if notes.get(s)]
+    what = [f'- {s}: {SUITE_TRIALS.get(s) or OTHER_REPORTS[s]}' for s in suites]
+    return ['What it means:', ''] + what + [
+        '', 'A localization is right when its position is within 0.2 m and its heading within 5° of the truth '
+        '(the thesis criterion; the tables also give 0.5 m / 10°). "Confident-wrong" (also "marked success but '
+        'wrong"): the answer says `success` but is not right - the share of all trials, the figure a robot '
+        f'pays for. "time / baseline": median time over the thesis baseline ({BASELINE}, Δα = 5°) on the same '
+        'trials of the same run (< 1 is faster). Times are per localization, on the machine below.', '']

@@ -13,15 +13,20 @@ _MAPS = {}        # map name -> OccupancyMap, in each worker (set by worker_init
 _LOCALIZERS = {}  # per worker process
 
 
+def localizer_of(trial) -> Localizer:
+    """The trial's Localizer in this process: one per map, kept (a map of the trial's own - the
+    unmapped suite - is built for it alone)."""
+    if trial.own_map is not None:
+        return Localizer(trial.own_map)
+    if trial.map_name not in _LOCALIZERS:
+        _LOCALIZERS[trial.map_name] = Localizer(_MAPS[trial.map_name])
+    return _LOCALIZERS[trial.map_name]
+
+
 def run_job(job):
     """One (trial, method) localization in a worker; returns a row."""
     trial_id, trial, method = job
-    if trial.own_map is not None:      # a map of its own (the unmapped suite): built for this trial alone
-        loc = Localizer(trial.own_map)
-    else:
-        loc = _LOCALIZERS.get(trial.map_name)
-        if loc is None:
-            loc = _LOCALIZERS[trial.map_name] = Localizer(_MAPS[trial.map_name])
+    loc = localizer_of(trial)
     row = {'trial': trial_id, 'suite': trial.suite, 'map': trial.map_name, **trial.condition, 'method': method,
            'local_map_cells': trial.local_map_cells,
            'truth': [round(v, 4) for v in trial.truth.as_tuple()]}

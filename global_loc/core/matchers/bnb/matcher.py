@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import NamedTuple, Optional
+from typing import Callable, NamedTuple, Optional
 
 import numpy as np
 
@@ -73,6 +73,10 @@ class BranchAndBoundMatcher(Matcher):
         self.distinct_angle = self.options.distinct_angle
         self.stack = PrecomputationGridStack(occupancy_map, self.options)
         self.searcher = ThreadedSearch(slice_expansions)
+        # Called with each match's distinct peaks (their leaf scores), their refined fits and the
+        # ranked candidates: what an experiment on the band or the refinement measures
+        # (benchmarks/experiments/), read without changing the search. None: nothing called.
+        self.on_peaks: Optional[Callable[[list[float], list[float], list[Candidate]], None]] = None
         warm_up()
 
     def judge_exhaustive(self, candidates):
@@ -263,4 +267,6 @@ class BranchAndBoundMatcher(Matcher):
                          see_through=float(through[i])) for i in order]
         if out:
             out[0].covariance = landscape_covariance(self.stack.field, frame, *refined[order[0], :3], pts)
+        if self.on_peaks is not None:
+            self.on_peaks([c.score for c in peaks], [float(f) for f in refined[:, 3]], out)
         return out

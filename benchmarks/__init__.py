@@ -1,0 +1,1 @@
+"""The benchmark's committed results (results/) and its experiments (experiments/)."""

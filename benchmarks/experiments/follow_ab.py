@@ -1,0 +1,84 @@
+"""The follow suite (resolution by motion on the CARMEN logs, global_loc/bench/follow.py)
+with two sets of bnb options (A and B): each start localized and followed twice on one
+Localizer, the arms interleaved; rows (the suite's fields plus the arm) to rows.jsonl, which
+`--summarize` reads.
+
+    python -m benchmarks.experiments.follow_ab --a band_allowance=1.0 --b band_allowance=0.03 --out out/follow_ab
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from collections import defaultdict
+from dataclasses import replace
+
+from global_loc.bench.follow import FOLLOW_S, LOGS, log_starts, start_row
+from global_loc.core.localizer import Localizer
+from global_loc.core.transform import Rigid2D
+from global_loc.offline.follow import FollowBounds, follow_start
+
+from .options_ab import REPO, parse_options
+
+
+def run(args) -> int:
+    arms = (('A', parse_options(args.a)), ('B', parse_options(args.b)))
+    os.makedirs(args.out, exist_ok=True)
+    with open(os.path.join(args.out, 'rows.jsonl'), 'w') as out:
+        for log in LOGS:
+            path = os.path.join(args.shared, 'carmen', f'{log}-corrected.log.gz')
+            if not os.path.exists(path):
+                continue
+            for i, m, frames in log_starts(log, path, args.starts, args.seed, FOLLOW_S):
+                loc = Localizer(m)
+                matcher = loc.matcher('bnb')
+                default = matcher.options
+                for arm, changes in arms:
+                    matcher.options = replace(default, **changes)
+                    line = follow_start(loc, frames, i, FollowBounds.for_seconds(FOLLOW_S), Rigid2D(), 'bnb')
+                    out.write(json.dumps({**start_row(log, line), 'arm': arm, 'options': changes}) + '\n')
+                    out.flush()
+                matcher.options = default
+    return 0
+
+
+def summarize(paths: list[str]) -> list[str]:
+    """Per log and arm: right after following, confident-wrong, settled; and the starts whose end changed."""
+    pairs = defaultdict(dict)
+    for path in paths:
+        for line in open(path):
+            if line.strip():
+                r = json.loads(line)
+                pairs[(r['log'], r['index'])][r['arm']] = r
+    lines = ['| log | arm | starts | right | confident-wrong | followed | settled |', '|---' * 7 + '|']
+    for log in sorted({k[0] for k in pairs}):
+        for arm in 'AB':
+            rr = [p[arm] for k, p in pairs.items() if k[0] == log and arm in p]
+            wrong = sum(r['outcome'] == 'localized' and not r['ok'] for r in rr)
+            lines.append(f"| {log} | {arm} | {len(rr)} | {sum(r['ok'] for r in rr)} | {wrong} "
+                         f"| {sum(bool(r['followed']) for r in rr)} | {sum(bool(r['settled']) for r in rr)} |")
+    changed = [(k, p) for k, p in sorted(pairs.items()) if 'A' in p and 'B' in p
+               and (p['A']['outcome'], p['A']['ok']) != (p['B']['outcome'], p['B']['ok'])]
+    return lines + [''] + [f"- {log} start {index}: {p['A']['outcome']} ok={p['A']['ok']} -> {p['B']['outcome']} "
+                           f"ok={p['B']['ok']}" for (log, index), p in changed]
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    p.add_argument('--summarize', nargs='+', metavar='ROWS', help='read these rows.jsonl files; run nothing')
+    p.add_argument('--starts', type=int, default=15, help='starts per log')
+    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--a', nargs='*', default=[], metavar='NAME=VALUE', help="arm A's options (default: bnb's)")
+    p.add_argument('--b', nargs='*', default=[], metavar='NAME=VALUE', help="arm B's options")
+    p.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'))
+    p.add_argument('--out', default=os.path.join(REPO, 'out', 'follow_ab'))
+    args = p.parse_args(argv)
+    if args.summarize:
+        print('\n'.join(summarize(args.summarize)))
+        return 0
+    return run(args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

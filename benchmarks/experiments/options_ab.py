@@ -1,0 +1,180 @@
+"""bnb with two sets of options (A and B) on the benchmark's trials, in one process on one
+matcher per map (one precomputation), the two arms interleaved trial by trial so the
+machine's drift falls on both. Rows: bench.worker.run_job's fields plus the arm, its
+options, and each match's peaks (leaf scores, refined fits, ranked candidates) read through
+`BranchAndBoundMatcher.on_peaks`. `--summarize` reads them: per suite (and change level or
+log) right / success / confident-wrong, time and expansions, A against B, and every trial
+whose outcome changed.
+
+    python -m benchmarks.experiments.options_ab --suites sim,cut,prior,carmen,changed \\
+        --a band_allowance=1.0 --b band_allowance=0.03 --out out/band
+    python -m benchmarks.experiments.options_ab --summarize out/band/rows.jsonl
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from collections import defaultdict
+from dataclasses import fields, replace
+
+import cv2
+import numpy as np
+
+from global_loc.bench import worker
+from global_loc.bench.changed import changed_trials
+from global_loc.bench.suites import carmen_trials, cut_trials, load_maps, prior_trials, sim_trials
+from global_loc.core.matchers import BranchAndBoundOptions
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def parse_options(pairs: list[str]) -> dict:
+    """['band_allowance=0.03', ...] -> {'band_allowance': 0.03}; an unknown name is an error."""
+    known = {f.name: f.type for f in fields(BranchAndBoundOptions)}
+    out = {}
+    for pair in pairs:
+        name, _, value = pair.partition('=')
+        if name not in known:
+            raise SystemExit(f'{name}: not a BranchAndBoundOptions field ({", ".join(sorted(known))})')
+        out[name] = type(getattr(BranchAndBoundOptions(), name))(value)
+    return out
+
+
+def build(args) -> tuple[list, dict]:
+    """The trials of the asked suites (seeded as the benchmark's) and the maps they need."""
+    trials, maps = [], {}
+    if {'sim', 'cut', 'prior'} & set(args.suites):
+        maps.update(load_maps(args.shared, quick=True))
+        if 'cut' in args.suites:
+            trials += cut_trials(maps, max(1, args.poses // 5), args.seed)
+        if 'sim' in args.suites:
+            trials += sim_trials(maps, args.poses, args.seed)
+        if 'prior' in args.suites:
+            trials += prior_trials(maps, args.poses, args.seed)
+    if 'changed' in args.suites:
+        full = load_maps(args.shared, quick=False)
+        maps.update(full)
+        trials += changed_trials(full, args.changed_poses, args.seed)
+    if 'carmen' in args.suites:
+        carmen, carmen_maps, _ = carmen_trials(args.shared, args.scans_per_log, args.seed)
+        maps.update(carmen_maps)
+        trials += carmen
+    return trials, maps
+
+
+class PeakRecord:
+    """The peaks of a localization's first match (the scan's own search), as the matcher's
+    on_peaks hook hands them over; `searches` counts every match of the localization (the
+    mirror check and a rival search are matches too)."""
+
+    def __init__(self):
+        self.leaf, self.fit, self.candidates, self.searches = [], [], [], 0
+
+    def __call__(self, leaf, fit, candidates):
+        self.searches += 1
+        if self.searches == 1:
+            self.leaf, self.fit = leaf, fit
+            self.candidates = [(c.score, c.explained) for c in candidates]
+
+
+def run(args) -> int:
+    arms = (('A', parse_options(args.a)), ('B', parse_options(args.b)))
+    trials, maps = build(args)
+    print(f'{len(trials)} trials, A {arms[0][1]}, B {arms[1][1]}', file=sys.stderr)
+    worker.worker_init(maps, args.threads)
+    cv2.setNumThreads(args.threads)
+    os.makedirs(args.out, exist_ok=True)
+    t0 = time.time()
+    with open(os.path.join(args.out, 'rows.jsonl'), 'w') as out:
+        for i, trial in enumerate(trials):
+            matcher = worker.localizer_of(trial).matcher('bnb')
+            default = matcher.options
+            for arm, changes in arms:
+                matcher.options, matcher.on_peaks = replace(default, **changes), PeakRecord()
+                row = worker.run_job((i, trial, 'bnb'))
+                peaks = matcher.on_peaks
+                row.update(arm=arm, options=changes, searches=peaks.searches, peak_leaf=peaks.leaf,
+                           peak_fit=peaks.fit, candidates=peaks.candidates)
+                out.write(json.dumps(row) + '\n')
+            matcher.options, matcher.on_peaks = default, None
+            if i % 20 == 0:
+                print(f'{i}/{len(trials)} {time.time() - t0:.0f} s', file=sys.stderr, flush=True)
+    return 0
+
+
+def group_name(r: dict) -> str:
+    if r['suite'] == 'changed':
+        return f"changed level {r['change']}"
+    return f"carmen {r['log']}" if r['suite'] == 'carmen' else r['suite']
+
+
+def figures(rows: list[dict]) -> tuple[str, str, str, int]:
+    t = np.array([r['time_s'] for r in rows if r['time_s'] == r['time_s']])     # NaN: the scan was refused
+    return (f"{sum(r['ok'] for r in rows)} / {sum(r['success'] for r in rows)} / "
+            f"{sum(r['success'] and not r['ok'] for r in rows)}",
+            f'{np.median(t):.3f} / {np.percentile(t, 95):.2f}' if len(t) else '–',
+            f"{int(np.median([r.get('expansions', 0) for r in rows]))}",
+            sum(r['outcome'] == 'search_incomplete' for r in rows))
+
+
+def summarize(paths: list[str]) -> list[str]:
+    """The A/B table and the changed trials, as markdown lines."""
+    pairs = defaultdict(dict)
+    for path in paths:
+        for line in open(path):
+            if line.strip():
+                r = json.loads(line)
+                pairs[(path, r['trial'])][r['arm']] = r
+    groups = defaultdict(list)
+    for p in pairs.values():
+        if 'A' in p and 'B' in p:
+            groups[group_name(p['A'])].append(p)
+    lines = ['| set | n | right / success / confident-wrong, A -> B | median / p95 s, A -> B '
+             '| median expansions, A -> B | node-budget stops, A -> B | outcome changed |', '|---' * 7 + '|']
+    changed = []
+    for name in sorted(groups):
+        ps = groups[name]
+        fa, fb = figures([p['A'] for p in ps]), figures([p['B'] for p in ps])
+        diff = [p for p in ps if any(p['A'].get(k) != p['B'].get(k) for k in ('outcome', 'ok', 'success'))]
+        changed += [(name, p) for p in diff]
+        lines.append(f'| {name} | {len(ps)} | {fa[0]} -> {fb[0]} | {fa[1]} -> {fb[1]} | {fa[2]} -> {fb[2]} '
+                     f'| {fa[3]} -> {fb[3]} | {len(diff)} |')
+    lines.append('')
+    for name, p in changed:
+        a, b = p['A'], p['B']
+        lines.append(f"- {name} trial {a['trial']} ({a['map']}): {a['outcome']} ok={a['ok']} score {a.get('score')} "
+                     f"-> {b['outcome']} ok={b['ok']} score {b.get('score')}")
+    return lines
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    p.add_argument('--summarize', nargs='+', metavar='ROWS', help='read these rows.jsonl files; run nothing')
+    p.add_argument('--suites', default='sim,cut,prior,carmen,changed')
+    p.add_argument('--a', nargs='*', default=[], metavar='NAME=VALUE', help="arm A's options (default: bnb's)")
+    p.add_argument('--b', nargs='*', default=[], metavar='NAME=VALUE', help="arm B's options")
+    p.add_argument('--poses', type=int, default=6)
+    p.add_argument('--changed-poses', type=int, default=4)
+    p.add_argument('--scans-per-log', type=int, default=12)
+    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--threads', type=int, default=1, help='search threads (cv2.setNumThreads)')
+    p.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'))
+    p.add_argument('--out', default=os.path.join(REPO, 'out', 'options_ab'))
+    args = p.parse_args(argv)
+    args.suites = args.suites.split(',')
+    return args
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    if args.summarize:
+        print('\n'.join(summarize(args.summarize)))
+        return 0
+    return run(args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
