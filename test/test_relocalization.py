@@ -20,7 +20,7 @@ from global_loc.core.map_io import save_map_yaml
 from global_loc.core.newest_message import NewestMessage
 from global_loc.core.outcome import Outcome
 from global_loc.core.pose_history import PoseHistory
-from global_loc.core.request import RequestDefaults, make_request
+from global_loc.core.request import Asked, RequestDefaults, make_request
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import (
     pose_from_msg,
@@ -272,7 +272,7 @@ class TurningRobot:
 
 def request(**fields):
     """A request as the server makes it, with the server's default method and angle step."""
-    return make_request(RequestDefaults('bnb', 5.0, 5.0), **fields)
+    return make_request(Asked(**fields), RequestDefaults('bnb', 5.0, 5.0))
 
 
 @pytest.mark.parametrize('odometry_after_s', [0.0, 0.05])

@@ -62,21 +62,35 @@ def check_bound(name: str, value: float) -> float:
     return value
 
 
-def make_request(defaults: RequestDefaults, *, method: str = '', angle_step_deg: float = 0.0,
-                 timeout_s: float = 0.0, center: Rigid2D = ORIGIN, radius_m: float = 0.0,
-                 yaw_tolerance_deg: float = 0.0, resolve_by_motion_s: float = 0.0, rotate_in_place: bool = False,
-                 publish: bool = True, publish_if_ambiguous: bool = False, origin: str = 'goal') -> Request:
+@dataclass(frozen=True)
+class Asked:
+    """A request as it was asked, before validation: an action goal's fields, or those of
+    ~/trigger and the watch's relocalization (0 / '' leave a field to the server's default)."""
+    origin: str = 'goal'        # who asked: goal, trigger, reinitialize, relocalization
+    method: str = ''
+    angle_step_deg: float = 0.0
+    timeout_s: float = 0.0
+    center: Rigid2D = ORIGIN
+    radius_m: float = 0.0
+    yaw_tolerance_deg: float = 0.0
+    resolve_by_motion_s: float = 0.0
+    rotate_in_place: bool = False
+    publish: bool = True
+    publish_if_ambiguous: bool = False
+
+
+def make_request(asked: Asked, defaults: RequestDefaults) -> Request:
     """The request with 0 / '' replaced by the defaults and every field checked; RequestError
     (naming the field) otherwise. An unknown method or one this OpenCV build lacks is one."""
     try:
-        name = resolve_method(method or defaults.method)
-        step = check_angle_step(angle_step_deg or defaults.angle_step_deg)
-        region = SearchRegion(center, check_bound('search_radius_m', radius_m),
-                              math.radians(check_bound('search_yaw_tolerance_deg', yaw_tolerance_deg)))
+        name = resolve_method(asked.method or defaults.method)
+        step = check_angle_step(asked.angle_step_deg or defaults.angle_step_deg)
+        region = SearchRegion(asked.center, check_bound('search_radius_m', asked.radius_m),
+                              math.radians(check_bound('search_yaw_tolerance_deg', asked.yaw_tolerance_deg)))
     except RequestError:
         raise
     except ValueError as e:      # MethodError, the angle step, a non-finite centre
         raise RequestError(str(e)) from None
-    return Request(name, step, check_bound('scan_timeout_s', timeout_s or defaults.scan_timeout_s), region,
-                   check_bound('resolve_by_motion_s', resolve_by_motion_s), bool(rotate_in_place), bool(publish),
-                   bool(publish_if_ambiguous), origin)
+    return Request(name, step, check_bound('scan_timeout_s', asked.timeout_s or defaults.scan_timeout_s), region,
+                   check_bound('resolve_by_motion_s', asked.resolve_by_motion_s), bool(asked.rotate_in_place),
+                   bool(asked.publish), bool(asked.publish_if_ambiguous), asked.origin)

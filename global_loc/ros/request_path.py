@@ -24,7 +24,7 @@ from ..core.matchers import MethodError
 from ..core.mount import LaserMount
 from ..core.outcome import CanceledError, Outcome, Stage
 from ..core.pose_history import PoseHistory
-from ..core.request import Request, RequestError, make_request
+from ..core.request import Asked, Request, RequestError, make_request
 from ..core.scan import ScanError, scan_to_points
 from ..core.transform import Rigid2D, format_pose
 from .convert import ended_result, result_to_msg, scan_from_msg, stamp_seconds
@@ -55,6 +55,14 @@ class Collaborators:
     logger: object
 
 
+@dataclass(frozen=True)
+class Asker:
+    """Who asked, as the path reaches them while it works: whether they cancelled, and the
+    action's feedback (progress, stage, best score, hypotheses); a service has neither."""
+    cancelled: Callable[[], bool] = lambda: False
+    feedback: Callable[..., None] = lambda *a: None
+
+
 class RequestPath:
     def __init__(self, c: Collaborators):
         self.c = c
@@ -72,8 +80,8 @@ class RequestPath:
         self.stopping.set()
 
     # ---- admit and validate ------------------------------------------------------------
-    def serve(self, fields: dict, origin: str, cancelled=lambda: False, feedback=lambda *a: None) -> Localize.Result:
-        """One request (`fields`: make_request's keywords); never raises."""
+    def serve(self, asked: Asked, asker: Asker = Asker()) -> Localize.Result:
+        """One request, as asked; never raises."""
         if not self.active:
             return self.end_early(Outcome.NOT_ACTIVE, self.inactive_reason)
         if not self.busy.acquire(blocking=False):
@@ -84,8 +92,8 @@ class RequestPath:
         def gone() -> bool:       # the configuration this request was admitted under has ended
             return self.stopping.is_set() or self.epoch != epoch
         try:
-            request = make_request(self.c.config().request_defaults(), origin=origin, **fields)
-            return self.run(request, lambda: cancelled() or gone(), feedback)
+            request = make_request(asked, self.c.config().request_defaults())
+            return self.run(request, Asker(lambda: asker.cancelled() or gone(), asker.feedback))
         except RequestError as e:
             return self.end_early(Outcome.BAD_GOAL, f'bad request: {e}')
         except CanceledError:
@@ -112,7 +120,8 @@ class RequestPath:
         return ended_result(outcome, message)
 
     # ---- localize ---------------------------------------------------------------------
-    def run(self, request: Request, cancelled, feedback) -> Localize.Result:
+    def run(self, request: Request, asker: Asker) -> Localize.Result:
+        cancelled = asker.cancelled
         start = time.monotonic()
         maps = self.c.maps.wait_current(request.scan_timeout_s, cancelled)   # a newer map may be building
         if maps.built is None or not self.c.maps.is_current(maps.generation):
@@ -122,15 +131,16 @@ class RequestPath:
             localizer.matcher(request.method)       # prepared with the map, or refused now: never built here
         except MethodError as e:
             return self.end_early(Outcome.BAD_GOAL, f'bad request: {e}')
-        newest = self.wait_for_view(request, start, cancelled, feedback)
+        newest = self.wait_for_view(request, start, asker)
         if newest is None:
             return self.end_early(Outcome.NO_SCAN, f'no {self.wanted()} within {seconds(request.scan_timeout_s)} s')
         try:
             view, messages = make_view(self.c.sensors, newest, start, self.c.mount, self.c.odometry,
                                        self.c.config().view)
             self.log_view(view, messages)
-            result = localizer.localize_points(view.points, request.method, request.angle_step_deg, self.progress(
-                cancelled, feedback), base_T_laser=view.base_T_laser, region=request.region)
+            result = localizer.localize_points(view.points, request.method, request.angle_step_deg,
+                                               self.progress(asker), base_T_laser=view.base_T_laser,
+                                               region=request.region)
         except ScanError as e:      # ViewError, MountError, NoMounting are ScanErrors
             return self.end_early(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
         except BudgetError as e:    # the goal asks for more work than a goal may do
@@ -138,7 +148,7 @@ class RequestPath:
         reference = max(messages.values(), key=lambda m: stamp_seconds(m.header.stamp))
         shown = (view.points, view.base_T_laser, reference)
         if result.outcome == Outcome.AMBIGUOUS and request.resolve_by_motion_s > 0:
-            result, shown = self.resolve_by_motion(result, messages, request, localizer, cancelled, feedback, shown)
+            result, shown = self.resolve_by_motion(result, messages, request, localizer, asker, shown)
         specs = self.c.sensors.specs
         if len(specs) > 1 or specs[0].kind != 'scan':     # one laser alone: its messages as they always were
             result = dataclasses.replace(result, message=f'{result.message} [{view.summary()}]')
@@ -146,7 +156,7 @@ class RequestPath:
             raise CanceledError()
         return self.publish(request, result, shown, maps.generation, localizer.map, start)
 
-    def resolve_by_motion(self, result, messages: dict, request: Request, localizer, cancelled, feedback,
+    def resolve_by_motion(self, result, messages: dict, request: Request, localizer, asker: Asker,
                           shown: tuple) -> tuple:
         """Followed over the primary laser's scans (the watch's laser); (result, what to show)."""
         primary = next((s for s in self.c.sensors.specs if s.primary), None)
@@ -160,7 +170,7 @@ class RequestPath:
         except ScanError as e:
             return dataclasses.replace(result, message=f'{result.message} (cannot resolve by motion: {e})'), shown
         result, last = resolve_by_motion(self.c.motion(), MotionStart(result, msg, mount.base_T_laser, localizer),
-                                         request, self.c.config()['rotate_speed'], cancelled, feedback)
+                                         request, self.c.config()['rotate_speed'], asker.cancelled, asker.feedback)
         if last is msg:
             return result, shown
         return result, (scan_to_points(mount.upright(scan_from_msg(last))), mount.base_T_laser, last)
@@ -171,13 +181,14 @@ class RequestPath:
         what = 'scan' if all(s.kind == 'scan' for s in specs) else 'sensor message'
         return f'{what} on {", ".join(s.topic for s in specs)}'
 
-    def wait_for_view(self, request: Request, start: float, cancelled, feedback):
+    def wait_for_view(self, request: Request, start: float, asker: Asker):
         self.c.logger.info(f'localizing ({request.origin}): method {request.method}, waiting up to '
                            f'{seconds(request.scan_timeout_s)} s for a {self.wanted()}')
-        feedback(0.0, Stage.WAITING_FOR_SCAN, 0.0)
-        newest = self.c.sensors.wait(start, request.scan_timeout_s, self.c.config().view.merge_window_s, cancelled)
+        asker.feedback(0.0, Stage.WAITING_FOR_SCAN, 0.0)
+        newest = self.c.sensors.wait(start, request.scan_timeout_s, self.c.config().view.merge_window_s,
+                                     asker.cancelled)
         if newest is not None:
-            feedback(0.05, Stage.PREPARING_SCAN, 0.0)   # local map or points, per method
+            asker.feedback(0.05, Stage.PREPARING_SCAN, 0.0)   # local map or points, per method
         return newest
 
     def log_view(self, view, messages: dict) -> None:
@@ -187,17 +198,17 @@ class RequestPath:
             self.c.logger.info(f'matching a scan view: {view.summary()}')
 
     @staticmethod
-    def progress(cancelled, feedback):
+    def progress(asker: Asker):
         """The matchers' progress callback: cancel between search steps; at most ~10
         feedback messages a second."""
         last = [0.0]
 
         def report(fraction, best):
-            if cancelled():
+            if asker.cancelled():
                 raise CanceledError()
             if time.monotonic() - last[0] > 0.1 or fraction >= 1.0:
                 last[0] = time.monotonic()
-                feedback(0.05 + 0.9 * fraction, Stage.MATCHING, best)
+                asker.feedback(0.05 + 0.9 * fraction, Stage.MATCHING, best)
         return report
 
     # ---- publish ------------------------------------------------------------------------
@@ -234,10 +245,10 @@ class RequestPath:
         return age
 
 
-def goal_fields(goal) -> dict:
-    """make_request's keywords from a Localize goal."""
+def asked_by_goal(goal) -> Asked:
+    """A Localize goal, as asked."""
     c = goal.search_center
-    return dict(method=goal.method, angle_step_deg=goal.angle_step_deg, timeout_s=goal.timeout_s,
+    return Asked(origin='goal', method=goal.method, angle_step_deg=goal.angle_step_deg, timeout_s=goal.timeout_s,
                 center=Rigid2D(c.x, c.y, c.theta), radius_m=goal.search_radius_m,
                 yaw_tolerance_deg=goal.search_yaw_tolerance_deg, resolve_by_motion_s=goal.resolve_by_motion_s,
                 rotate_in_place=goal.rotate_in_place, publish=goal.publish_initialpose,

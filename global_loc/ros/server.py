@@ -40,12 +40,13 @@ from ..core.mount import LaserMount
 from ..core.newest_message import NewestMessage
 from ..core.outcome import Outcome
 from ..core.pose_history import PoseHistory
+from ..core.request import Asked
 from .convert import map_from_msg, pose_from_msg, stamp_seconds
 from .guards import InFlight, answer_every_change_state, guard, warn_about_peers_once
 from .motion import MotionContext
 from .node_main import exit_process, run_node
 from .parameters import BY_NAME, ConfigError, apply_live, check_set, declare_parameters, parameter_value, read_config
-from .request_path import Collaborators, RequestPath, goal_fields, publish_feedback, trigger_message
+from .request_path import Asker, Collaborators, RequestPath, asked_by_goal, publish_feedback, trigger_message
 from .rviz import hypotheses_msg, local_map_msg, markers_msg
 from .sensors import SensorInputs, SensorMounts, laser_fit, subscribe
 from .watch import HealthWatch, WatchOutputs
@@ -282,9 +283,9 @@ class GlobalLocServer(LifecycleNode):
             threading.Thread(target=self.relocalize, daemon=True, name='relocalize').start()
 
     def relocalize(self) -> None:
-        fields = dict(resolve_by_motion_s=self.config['relocalize.resolve_by_motion_s'])
+        asked = Asked(origin='relocalization', resolve_by_motion_s=self.config['relocalize.resolve_by_motion_s'])
         with self.in_flight():
-            result = self.path.serve(fields, 'relocalization')
+            result = self.path.serve(asked)
         self.get_logger().info(f'relocalization: {Outcome(result.outcome).label}: {result.message}')
         self.watch.finished(Outcome(result.outcome), published=bool(result.success))
 
@@ -307,8 +308,9 @@ class GlobalLocServer(LifecycleNode):
     def execute(self, goal_handle):
         """The action: serve the goal, then end it as its outcome says."""
         with self.in_flight():
-            result = self.path.serve(goal_fields(goal_handle.request), 'goal', lambda: goal_handle.is_cancel_requested,
-                                     functools.partial(publish_feedback, goal_handle))
+            result = self.path.serve(asked_by_goal(goal_handle.request),
+                                     Asker(lambda: goal_handle.is_cancel_requested,
+                                           functools.partial(publish_feedback, goal_handle)))
         if result.outcome == Outcome.LOCALIZED:
             goal_handle.succeed()
         elif result.outcome == Outcome.CANCELED and goal_handle.is_cancel_requested:
@@ -320,7 +322,7 @@ class GlobalLocServer(LifecycleNode):
     def on_trigger(self, request, response):
         """std_srvs/Trigger: localize the next scan with the defaults; the outcome in one line."""
         with self.in_flight():
-            result = self.path.serve({}, 'trigger')
+            result = self.path.serve(Asked(origin='trigger'))
         response.success = bool(result.success)
         pose = pose_from_msg(result.pose.pose.pose) if len(result.hypotheses.poses) else None
         response.message = trigger_message(result, pose)
@@ -329,7 +331,7 @@ class GlobalLocServer(LifecycleNode):
     def on_reinitialize(self, request, response):
         """std_srvs/Empty (nav2's ReinitializeGlobalLocalization): the same as ~/trigger."""
         with self.in_flight():
-            self.path.serve({}, 'reinitialize')
+            self.path.serve(Asked(origin='reinitialize'))
         return response
 
 
