@@ -6,13 +6,15 @@ import sys
 
 import pytest
 
+from global_loc.bench.tables import read_rows
+
 
 def run_bench(out, *args) -> list[dict]:
     """`python -m global_loc.bench --quick ARGS --out OUT`: its rows (it must succeed)."""
     done = subprocess.run([sys.executable, '-m', 'global_loc.bench', '--quick', *args, '--out', str(out)],
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
-    return [json.loads(line) for line in (out / 'rows.jsonl').read_text().splitlines()]
+    return read_rows(str(out))
 
 
 def test_bench_writes_rows_report_and_plots(tmp_path):

@@ -17,7 +17,7 @@ from global_loc.testing.processes import TopicRecorder, isolated_env, reliable, 
 
 pytestmark = pytest.mark.ros
 
-# benchmarks/results/rows.jsonl: suite sim, map office, fov 270, range 20, clutter 0,
+# benchmarks/results/rows.jsonl.gz: suite sim, map office, fov 270, range 20, clutter 0,
 # template_ccoeff at its Δα of 5° with raw_success and not raw_ok: the trials' true poses (run at ec9143d)
 RAW_CONFIDENTLY_WRONG = [Rigid2D(9.825, 1.375, -1.1604), Rigid2D(14.375, 13.425, 2.8136)]
 

@@ -1,10 +1,10 @@
 """`python -m global_loc.bench [--quick] [--suites cut,sim,carmen,changed] [--jobs N]`
 
 Runs the benchmark suites through the same Localizer the server uses, writes raw rows
-(rows.jsonl), REPORT.md and PNG plots into the output folder (default
+(rows.jsonl.gz), REPORT.md and PNG plots into the output folder (default
 benchmarks/results/, or benchmarks/results/quick/ with --quick). Seeded: the same
 command makes the same trials; timings are the machine's. `--report-only` writes REPORT.md
-again from a folder's rows.jsonl and meta.json (a changed report without a rerun).
+again from a folder's rows.jsonl.gz and meta.json (a changed report without a rerun).
 """
 from __future__ import annotations
 
@@ -43,6 +43,7 @@ from .suites import (
     sim_trials,
     symmetric_maps,
 )
+from .tables import read_rows, write_rows
 from .unmapped import unmapped_trials
 from .worker import run_job, worker_init
 
@@ -99,7 +100,7 @@ def parse_args(argv):
                                                            f'a side (default: {",".join(map(str, SIZES))}; quick: '
                                                            'the first three)')
     parser.add_argument('--report-only', action='store_true',
-                        help='run nothing: write REPORT.md again from the output folder\'s rows.jsonl and '
+                        help='run nothing: write REPORT.md again from the output folder\'s rows.jsonl.gz and '
                              'meta.json (the plots and failure pictures stay as they are)')
     return parser.parse_args(argv)
 
@@ -194,7 +195,7 @@ def run_other_suites(run: Run, notes: dict) -> None:
 
 
 def notes_from_rows(all_rows: list[dict]) -> tuple[list[dict], dict]:
-    """rows.jsonl split back into the localization rows and the other suites' notes, as the
+    """The rows split back into the localization rows and the other suites' notes, as the
     report reads them (the soak suite as its summary)."""
     notes = {s: [r for r in all_rows if r.get('suite') == s] for s in NOTE_SUITES}
     notes = {s: rows for s, rows in notes.items() if rows}
@@ -204,9 +205,8 @@ def notes_from_rows(all_rows: list[dict]) -> tuple[list[dict], dict]:
 
 
 def report_again(out: str) -> int:
-    """REPORT.md from the committed rows.jsonl and meta.json of `out`, nothing run."""
-    with open(os.path.join(out, 'rows.jsonl')) as f:
-        rows, notes = notes_from_rows([json.loads(line) for line in f if line.strip()])
+    """REPORT.md from the committed rows and meta.json of `out`, nothing run."""
+    rows, notes = notes_from_rows(read_rows(out))
     with open(os.path.join(out, 'meta.json')) as f:
         meta = {**json.load(f), **notes}
     write_report(rows, meta, out, maps=None, trials=None)
@@ -233,9 +233,7 @@ def main(argv=None) -> int:
     trials = build_trials(run, notes)
     rows = localize_all(trials, methods, maps, args.jobs, threads)
     run_other_suites(run, notes)
-    with open(os.path.join(out, 'rows.jsonl'), 'w') as f:
-        for row in rows + [r for s in NOTE_SUITES for r in notes.get(s, [])]:
-            f.write(json.dumps(row) + '\n')
+    write_rows(out, rows + [r for s in NOTE_SUITES for r in notes.get(s, [])])
     meta = {'machine': machine, 'command': 'python -m global_loc.bench ' + ' '.join(argv or sys.argv[1:]),
             'jobs': args.jobs, 'threads': threads, 'wall_time_s': round(time.time() - t0, 1), 'quick': args.quick,
             'maps': {n: f'{m.width} x {m.height} cells at {m.resolution} m' for n, m in maps.items() if '/' not in n},

@@ -163,11 +163,14 @@ def write_report(rows, meta, out, maps, trials) -> None:
     # made it and what it means; the machine and the details follow.
     lead = summary_section(rows + meta.get('scaling', []), RESULTS if committed else None) or \
         (sections.pop(0) if sections else [])
-    md = ['# global_loc benchmark' + (' (quick)' if meta['quick'] else ''), '']
-    md += lead + command_line(rows, meta) + meaning(rows, meta) + machine(meta) + thesis_section(rows)
-    for section in sections:
-        md += section
-    md += failure_pictures(rows, trials, maps, out)
+    title = '# global_loc benchmark' + (' (quick)' if meta['quick'] else '')
+    details = [line for section in sections for line in section] + failure_pictures(rows, trials, maps, out)
+    md = [title, ''] + lead + command_line(rows, meta) + meaning(rows, meta) + machine(meta) + thesis_section(rows)
+    if details:     # one screen of figures here; every suite's tables, plots and failures in DETAILS.md
+        md += ['Each suite in full (every condition, map and log; plots; typical failures): [DETAILS.md](DETAILS.md).',
+               '']
+        with open(os.path.join(out, 'DETAILS.md'), 'w') as f:
+            f.write('\n'.join([f'{title}: every suite in full', '', '[The report](REPORT.md)', ''] + details) + '\n')
     with open(os.path.join(out, 'REPORT.md'), 'w') as f:
         f.write('\n'.join(md) + '\n')
 

@@ -40,97 +40,128 @@ from ..testing.ros_harness import Harness, rss_mb
 WARM_UP_GOALS = 20
 
 
+class SoakRun:
+    """The processes of one soak run and the goals it sends, one method per kind of goal."""
+
+    def __init__(self, seed: int, log_dir: str):
+        from ..testing.processes import isolated_env, start_server, start_sim
+        self.rng = np.random.default_rng(seed)
+        self.kidnap_poses = sample_free_poses(load_map_yaml(default_map_yaml()), 200, self.rng, clearance=0.6)
+        self.env, self.log_dir, self.start_server = isolated_env(), log_dir, start_server
+        os.makedirs(log_dir, exist_ok=True)
+        self.sim = start_sim(self.env, os.path.join(log_dir, 'sim.log'), 'rate_hz:=40.0', 'num_beams:=1081',
+                             'fov_deg:=270.0', 'x:=3.0', 'y:=4.0', 'yaw:=0.7')
+        self.servers = []
+        self.server = self.new_server()
+        self.h = Harness(self.env, 'global_loc_soak')
+        deadline = time.monotonic() + 20.0     # every goal is checked against a true pose
+        while self.h.truth is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+
+    def new_server(self):
+        # the simulator's laser sits BASE_T_LASER ahead of base_link (no tf2 here: the server is told)
+        self.servers.append(self.start_server(self.env, os.path.join(self.log_dir, f'server{len(self.servers)}.log'),
+                                              'max_search_s:=1.0', 'scan_timeout_s:=5.0', f'laser_x:={BASE_T_LASER.x}'))
+        self.server = self.servers[-1]
+        return self.server
+
+    def restart(self, row: dict) -> None:
+        """SIGTERM mid-goal, then start again."""
+        handle = self.h.send(method='template_ccoeff', angle_step_deg=0.05)
+        result_future = handle.get_result_async() if handle is not None else None
+        time.sleep(0.3)
+        t0 = time.monotonic()
+        code = self.server.stop(timeout=10.0)
+        res = self.h.wait(result_future, 3.0) if result_future is not None else None
+        row.update(kind='restart', exit_s=time.monotonic() - t0, exit_code=code, answered=res is not None,
+                   outcome=res.result.outcome if res else None)
+        self.new_server()
+
+    def limited(self, row: dict) -> None:
+        """A goal that ends at the 1 s search limit (or a cancel)."""
+        handle = self.h.send(method='template_ccoeff', angle_step_deg=0.05)
+        res = self.h.wait(handle.get_result_async(), 30.0) if handle else None
+        row.update(kind='limited', outcome=res.result.outcome if res else None)
+
+    def cancel(self, row: dict, method: str) -> None:
+        """A goal cancelled at a random moment."""
+        handle = self.h.send(publish_initialpose=True, method=method, angle_step_deg=1.0)
+        row['method'] = method
+        if handle is not None:
+            time.sleep(float(self.rng.uniform(0.05, 0.8)))
+            result_future = handle.get_result_async()
+            t0 = time.monotonic()
+            handle.cancel_goal_async()
+            res = self.h.wait(result_future, 10.0)
+            row.update(kind='cancel', cancel_s=time.monotonic() - t0 if res else None,
+                       outcome=res.result.outcome if res else None)
+
+    def concurrent(self, row: dict) -> None:
+        """Two clients at once."""
+        a, b = self.h.send(publish_initialpose=True), self.h.send(publish_initialpose=True)
+        outcomes = [self.h.wait(x.get_result_async(), 30.0) for x in (a, b) if x is not None]
+        row.update(kind='concurrent', outcomes=[r.result.outcome for r in outcomes if r])
+
+    def plain(self, row: dict) -> None:
+        """A bnb goal publishing /initialpose, its answer checked against the true pose."""
+        truth = self.h.truth
+        t0 = time.monotonic()
+        handle = self.h.send(publish_initialpose=True)
+        res = self.h.wait(handle.get_result_async(), 30.0) if handle else None
+        row.update(kind='plain', latency_s=time.monotonic() - t0, answered=res is not None)
+        if res is not None:
+            r = res.result
+            row.update(outcome=r.outcome, success=bool(r.success))
+            if len(r.hypotheses.poses) and truth is not None:
+                estimate = self.h.pose_from_msg(r.pose.pose.pose)
+                row.update(ok=pose_correct(estimate, truth), estimate=estimate.as_tuple(),
+                           truth=truth.as_tuple(), truth_after=self.h.truth.as_tuple())
+
+    def processes(self, row: dict) -> None:
+        """The server's memory and whether both processes live; a crash noted, a new server started."""
+        row['rss_mb'] = rss_mb(self.server.proc.pid)
+        row['server'] = len(self.servers) - 1
+        row['server_alive'] = self.server.proc.poll() is None
+        row['sim_alive'] = self.sim.proc.poll() is None
+        if not row['server_alive']:
+            row['crash_code'] = self.server.proc.returncode
+            self.new_server()
+
+    def close(self) -> list[dict]:
+        self.h.close()
+        t0 = time.monotonic()
+        code = self.server.stop(timeout=10.0)
+        return [{'suite': 'soak', 'kind': 'final_stop', 'exit_s': time.monotonic() - t0, 'exit_code': code},
+                {'suite': 'soak', 'kind': 'sim_stop', 'exit_code': self.sim.stop(timeout=10.0)}]
+
+
 def soak_rows(goals: int, seed: int, log_dir: str) -> list[dict]:
-    from ..testing.processes import isolated_env, start_server, start_sim
-    rng = np.random.default_rng(seed)
-    office = load_map_yaml(default_map_yaml())
-    kidnap_poses = sample_free_poses(office, 200, rng, clearance=0.6)
-    env = isolated_env()
-    os.makedirs(log_dir, exist_ok=True)
-    sim = start_sim(env, os.path.join(log_dir, 'sim.log'), 'rate_hz:=40.0', 'num_beams:=1081', 'fov_deg:=270.0',
-                    'x:=3.0', 'y:=4.0', 'yaw:=0.7')
-    servers, rows = [], []
-    # the simulator's laser sits BASE_T_LASER ahead of base_link (no tf2 here: the server is told)
-    server_params = ('max_search_s:=1.0', 'scan_timeout_s:=5.0', f'laser_x:={BASE_T_LASER.x}')
-
-    def new_server():
-        servers.append(start_server(env, os.path.join(log_dir, f'server{len(servers)}.log'), *server_params))
-        return servers[-1]
-
-    server = new_server()
-    h = Harness(env, 'global_loc_soak')
-    deadline = time.monotonic() + 20.0     # every goal is checked against a true pose
-    while h.truth is None and time.monotonic() < deadline:
-        time.sleep(0.05)
+    run, rows = SoakRun(seed, log_dir), []
     step = max(5, goals // 16)
     restarts = {goals - 1 - k * step for k in range(4)}
     try:
         for i in tqdm(range(goals), desc='soak goals', file=sys.stderr):
             row = {'suite': 'soak', 'goal': i}
             if i % 10 == 5:
-                h.kidnap(kidnap_poses[int(rng.integers(len(kidnap_poses)))])
+                run.h.kidnap(run.kidnap_poses[int(run.rng.integers(len(run.kidnap_poses)))])
                 row['kidnap'] = True
-            if i in restarts:                      # SIGTERM mid-goal, then start again
-                handle = h.send(method='template_ccoeff', angle_step_deg=0.05)
-                result_future = handle.get_result_async() if handle is not None else None
-                time.sleep(0.3)
-                t0 = time.monotonic()
-                code = server.stop(timeout=10.0)
-                res = h.wait(result_future, 3.0) if result_future is not None else None
-                row.update(kind='restart', exit_s=time.monotonic() - t0, exit_code=code, answered=res is not None,
-                           outcome=res.result.outcome if res else None)
-                server = new_server()
-            elif i % 10 == 3:                      # ends at the 1 s search limit (or a cancel)
-                handle = h.send(method='template_ccoeff', angle_step_deg=0.05)
-                res = h.wait(handle.get_result_async(), 30.0) if handle else None
-                row.update(kind='limited', outcome=res.result.outcome if res else None)
-            elif i % 7 == 2:                       # cancelled at a random moment
-                method = 'bnb' if (i // 7) % 2 else 'template_ccoeff'
-                handle = h.send(publish_initialpose=True, method=method, angle_step_deg=1.0)
-                row['method'] = method
-                if handle is not None:
-                    time.sleep(float(rng.uniform(0.05, 0.8)))
-                    result_future = handle.get_result_async()
-                    t0 = time.monotonic()
-                    handle.cancel_goal_async()
-                    res = h.wait(result_future, 10.0)
-                    row.update(kind='cancel', cancel_s=time.monotonic() - t0 if res else None,
-                               outcome=res.result.outcome if res else None)
-            elif i % 13 == 6:                      # two clients at once
-                a, b = h.send(publish_initialpose=True), h.send(publish_initialpose=True)
-                outcomes = [h.wait(x.get_result_async(), 30.0) for x in (a, b) if x is not None]
-                row.update(kind='concurrent', outcomes=[r.result.outcome for r in outcomes if r])
+            if i in restarts:
+                run.restart(row)
+            elif i % 10 == 3:
+                run.limited(row)
+            elif i % 7 == 2:
+                run.cancel(row, 'bnb' if (i // 7) % 2 else 'template_ccoeff')
+            elif i % 13 == 6:
+                run.concurrent(row)
             else:
-                truth = h.truth
-                t0 = time.monotonic()
-                handle = h.send(publish_initialpose=True)
-                res = h.wait(handle.get_result_async(), 30.0) if handle else None
-                row.update(kind='plain', latency_s=time.monotonic() - t0, answered=res is not None)
-                if res is not None:
-                    r = res.result
-                    row.update(outcome=r.outcome, success=bool(r.success))
-                    if len(r.hypotheses.poses) and truth is not None:
-                        estimate = h.pose_from_msg(r.pose.pose.pose)
-                        row.update(ok=pose_correct(estimate, truth), estimate=estimate.as_tuple(),
-                                   truth=truth.as_tuple(), truth_after=h.truth.as_tuple())
-            row['rss_mb'] = rss_mb(server.proc.pid)
-            row['server'] = len(servers) - 1
-            row['server_alive'] = server.proc.poll() is None
-            row['sim_alive'] = sim.proc.poll() is None
+                run.plain(row)
+            run.processes(row)
             rows.append(row)
-            if not row['server_alive']:        # a crash: note it and go on with a new server
-                row['crash_code'] = server.proc.returncode
-                server = new_server()
         time.sleep(0.5)
-        rows.append({'suite': 'soak', 'kind': 'summary', 'initialposes': h.initialposes,
-                     'wrong_initialposes': h.wrong_initialposes})
+        rows.append({'suite': 'soak', 'kind': 'summary', 'initialposes': run.h.initialposes,
+                     'wrong_initialposes': run.h.wrong_initialposes})
     finally:
-        h.close()
-        t0 = time.monotonic()
-        code = server.stop(timeout=10.0)
-        rows.append({'suite': 'soak', 'kind': 'final_stop', 'exit_s': time.monotonic() - t0, 'exit_code': code})
-        sim_code = sim.stop(timeout=10.0)
-        rows.append({'suite': 'soak', 'kind': 'sim_stop', 'exit_code': sim_code})
+        rows += run.close()
     return rows
 
 

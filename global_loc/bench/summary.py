@@ -2,11 +2,10 @@
 success, confident-wrong, median and p95 time - and where the other suites' figures are."""
 from __future__ import annotations
 
-import json
 import math
 import os
 
-from .tables import BASELINE, group, pct, secs, stats
+from .tables import BASELINE, ROWS, group, pct, read_rows, secs, stats
 
 # What each suite's trials are, in one line (the sections below the summary say more).
 SUITE_TRIALS = {
@@ -94,10 +93,9 @@ def summary_section(rows: list[dict], results_dir: str | None = None) -> list[st
     links = []
     if results_dir is not None:
         for suite in SUITE_TRIALS:
-            path = os.path.join(results_dir, suite, 'rows.jsonl')
-            if suite not in by_suite and os.path.exists(path):
-                with open(path) as f:
-                    committed = comparable([json.loads(line) for line in f if line.strip()])
+            folder = os.path.join(results_dir, suite)
+            if suite not in by_suite and os.path.exists(os.path.join(folder, ROWS)):
+                committed = comparable(read_rows(folder))
                 if committed:
                     lines.append(summary_line(suite, committed, f' ([run]({suite}/REPORT.md))'))
         links = [f'[{name}]({name}/REPORT.md) ({what})' for name, what in OTHER_REPORTS.items()
