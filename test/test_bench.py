@@ -24,9 +24,9 @@ def test_bench_writes_rows_report_and_plots(tmp_path):
     assert {r['method'] for r in rows} == {'template_ccoeff', 'features_orb'}
     assert all({'ok', 'ok_loose', 'time_s', 'success'} <= set(r) for r in rows)
     assert any(r['ok'] for r in rows if r['method'] == 'template_ccoeff')
-    report = (tmp_path / 'REPORT.md').read_text()
-    assert 'Suite 1: local maps cut from the map' in report and '| cores |' in report
-    assert 'time / baseline' in report and 'git_commit' in report
+    report, details = (tmp_path / 'REPORT.md').read_text(), (tmp_path / 'DETAILS.md').read_text()
+    assert 'Suite 1: local maps cut from the map' in details and '| cores |' in report
+    assert 'time / baseline' in report and 'git_commit' in report and '[DETAILS.md](DETAILS.md)' in report
     assert (tmp_path / 'cut_time_vs_size.png').stat().st_size > 5000
 
 
@@ -74,15 +74,16 @@ def test_the_report_is_written_again_from_its_rows_without_running_anything(tmp_
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-3000:]
     report = (out / 'REPORT.md').read_text()
-    assert report.index('## Summary') < report.index('Command:') < report.index('## Changed world')
+    assert report.index('## Summary') < report.index('Command:') < report.index('What it means:')
+    assert '## Changed world' in (out / 'DETAILS.md').read_text()
     assert '| changed |' in report and 'localizations in' not in done.stdout
 
 
 def test_changed_world_suite_reports_each_level_with_a_plot(tmp_path):
     rows = run_bench(tmp_path, '--suites', 'changed', '--poses', '1', '--methods', 'bnb', '--jobs', '1')
     assert sorted({r['change'] for r in rows}) == [0, 1, 2, 3] and all('expansions' in r for r in rows)
-    report = (tmp_path / 'REPORT.md').read_text()
-    assert '## Changed world' in report and '| bnb | 3 |' in report
+    details = (tmp_path / 'DETAILS.md').read_text()
+    assert '## Changed world' in details and '| bnb | 3 |' in details
     assert (tmp_path / 'changed.png').stat().st_size > 5000
 
 

@@ -138,7 +138,8 @@ def test_the_verdict_on_the_band_has_the_outcome_of_the_verdict_on_the_whole_kee
     judged as the whole 10% band saw them (band_allowance 1) and as the band set from the
     best leaf's fit sees them (only the places within it), the same outcome and, but for
     a confident answer's floor, the same confidence. With see-through it does not hold
-    (the test below; benchmarks/READING.md): why the narrow band is not the default."""
+    (the test below; docs/decisions/0010-the-narrow-band-stays-off-by-default.md): why the narrow band is
+    not the default."""
     rng = np.random.default_rng(seed)
     whole, tightest = BranchAndBoundOptions(band_allowance=1.0), BranchAndBoundOptions(band_allowance=0.0)
     n_points = 200

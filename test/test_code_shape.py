@@ -53,7 +53,9 @@ def test_tests_and_comments_say_the_behaviour_not_a_defect_number():
     numbered = re.compile(r'\bdef test_d\d+_|\bD\d+(?:-D\d+)?\b(?=[,:) ])|\b[Ii]ssue \d+|\b[Ss]top \d+\b|'
                           r'\bhelper [A-Z]\b|^# -+ item \d+')
     root = PACKAGE.parent
-    files = SOURCES + sorted((root / 'test').glob('*.py')) + sorted((root / 'docs').glob('*.md')) + [root / 'README.md']
+    files = (SOURCES + sorted((root / 'test').glob('*.py')) + sorted((root / 'docs').rglob('*.md'))
+             + sorted((root / 'benchmarks').rglob('*.md')) + sorted((root / 'benchmarks').rglob('*.py'))
+             + [root / 'README.md'])
     hits = [f'{p.name}:{k + 1}' for p in files if p.name != 'test_code_shape.py'
             for k, line in enumerate(p.read_text().splitlines()) if numbered.search(line)]
     assert not hits, hits
@@ -77,3 +79,14 @@ def test_the_architecture_layout_names_every_module():
     missing = [str(p.relative_to(PACKAGE)) for p in SOURCES if p.name not in ('__init__.py', '__main__.py')
                and not re.search(rf'\b{re.escape(p.name)}\b', layout)]
     assert not missing, missing
+
+
+def test_every_decision_record_the_repository_cites_exists():
+    """"docs/decisions/0010" in a comment, a parameter's description or a page sends the reader
+    to a record; a renumbered or dropped record must not leave the citation behind."""
+    root = PACKAGE.parent
+    records = {p.name[:4] for p in (root / 'docs' / 'decisions').glob('[0-9][0-9][0-9][0-9]-*.md')}
+    files = SOURCES + sorted((root / 'test').glob('*.py')) + sorted((root / 'docs').rglob('*.md'))
+    cited = {(p.name, n) for p in files for n in re.findall(r'decisions/(\d{4})', p.read_text())}
+    assert len(records) >= 10 and len(cited) >= 4
+    assert not [c for c in cited if c[1] not in records], sorted(cited)

@@ -31,8 +31,8 @@ RESOLVE_BY_MOTION_S = (0.0, 600.0)
 # a division by zero); above 10 m one cell holds a whole room and a scan has no shape.
 MAP_RESOLUTION_M = (1e-3, 10.0)
 # Cells in a map: 10 000 x 10 000 (1 km^2 at 10 cm). bnb's precomputation takes ~23 bytes a
-# cell (286 MB of grids and +365 MB peak for 4000^2, benchmarks/READING.md), so the cap
-# keeps one map's grids to ~2.3 GB; a larger map is refused at load, not at the first goal.
+# cell (286 MB of grids and +365 MB peak for 4000^2: docs/decisions/0011-the-planes-fit-a-memory-budget.md),
+# so the cap keeps one map's grids to ~2.3 GB; a larger map is refused at load, not at the first goal.
 MAX_MAP_CELLS = 100_000_000
 
 # Working memory one goal's thesis matcher may allocate (template: the rotation angles,

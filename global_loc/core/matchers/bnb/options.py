@@ -37,12 +37,12 @@ class BranchAndBoundOptions:
                                           'full fit) plus this, at most keep_ratio\'s band (verdict.searched_keep): '
                                           '1 (the default) is always the whole keep_ratio band; at the other '
                                           'defaults 0.03 is 13-20% faster but can change answers - one confident '
-                                          'wrong answer more on 150 real scans (benchmarks/READING.md)', (0.0, 1.0))
+                                          'wrong answer more on 150 real scans (docs/decisions/0010)', (0.0, 1.0))
     settle_slack: float = _option(1.0, "end the search early (never with a success) once no place it has not "
                                        "scored could make the answer confident, allowing this much for a pose's "
                                        'refined score above its search score (0.05: the most seen was +0.045); 1 '
                                        '(the default): never - an early ambiguous answer may lack the true place '
-                                       '(benchmarks/READING.md)', (0.0, 1.0))
+                                       '(docs/decisions/0012)', (0.0, 1.0))
     max_nodes: int = _option(400000, 'node expansions after which the search stops and says it was not exhaustive',
                              (1, 10 ** 9))
     hypotheses: int = _option(HYPOTHESES, 'distinct poses refined, judged and returned', (1, 100))

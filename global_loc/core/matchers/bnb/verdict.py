@@ -21,8 +21,8 @@ def searched_keep(fit, keep_ratio, min_confidence, band_allowance):
     explained, 5% at a full fit: a rival farther behind cannot change the outcome, only
     the confidence number) widened by band_allowance for refinement (a leaf is scored at
     a cell centre, the verdict at its refined pose: a rival's leaf may lie farther behind
-    than its refined score - measured, not bounded: benchmarks/READING.md), and never
-    wider than keep_ratio's band.
+    than its refined score - measured, not bounded:
+    docs/decisions/0009-the-band-allowance-is-measured-not-bounded.md), and never wider than keep_ratio's band.
     Non-decreasing in fit, and fit x searched_keep rises with the fit, so a search
     pruning by the incumbent's band prunes no node the final band would keep."""
     explained = min(max((fit - 0.3) / 0.3, 0.0), 1.0)
