@@ -64,8 +64,9 @@ def sources_by_scope() -> dict[str, list[Path]]:
 
 
 def own_modules() -> set[str]:
-    """The package itself and the test directory's modules (conftest, ros_helpers, ...)."""
-    return {'global_loc'} | {p.stem for p in (ROOT / 'test').glob('*.py')}
+    """The package itself, the repository's benchmark experiments and the test directory's
+    modules (conftest, ros_helpers, ...)."""
+    return {'global_loc', 'benchmarks'} | {p.stem for p in (ROOT / 'test').glob('*.py')}
 
 
 def used_names(node) -> list[str]:

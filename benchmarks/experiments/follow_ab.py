@@ -7,11 +7,9 @@ Localizer, the arms interleaved; rows (the suite's fields plus the arm) to rows.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
-from collections import defaultdict
 from dataclasses import replace
 
 from global_loc.bench.follow import FOLLOW_S, LOGS, log_starts, start_row
@@ -19,7 +17,7 @@ from global_loc.core.localizer import Localizer
 from global_loc.core.transform import Rigid2D
 from global_loc.offline.follow import FollowBounds, follow_start
 
-from .options_ab import REPO, parse_options
+from .options_ab import arm_arguments, arm_pairs, experiment_main, parse_options
 
 
 def run(args) -> int:
@@ -45,12 +43,7 @@ def run(args) -> int:
 
 def summarize(paths: list[str]) -> list[str]:
     """Per log and arm: right after following, confident-wrong, settled; and the starts whose end changed."""
-    pairs = defaultdict(dict)
-    for path in paths:
-        for line in open(path):
-            if line.strip():
-                r = json.loads(line)
-                pairs[(r['log'], r['index'])][r['arm']] = r
+    pairs = arm_pairs(paths, lambda path, r: (r['log'], r['index']))
     lines = ['| log | arm | starts | right | confident-wrong | followed | settled |', '|---' * 7 + '|']
     for log in sorted({k[0] for k in pairs}):
         for arm in 'AB':
@@ -65,19 +58,9 @@ def summarize(paths: list[str]) -> list[str]:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    p.add_argument('--summarize', nargs='+', metavar='ROWS', help='read these rows.jsonl files; run nothing')
+    p = arm_arguments(__doc__.split('\n\n')[0], 'follow_ab')
     p.add_argument('--starts', type=int, default=15, help='starts per log')
-    p.add_argument('--seed', type=int, default=0)
-    p.add_argument('--a', nargs='*', default=[], metavar='NAME=VALUE', help="arm A's options (default: bnb's)")
-    p.add_argument('--b', nargs='*', default=[], metavar='NAME=VALUE', help="arm B's options")
-    p.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'))
-    p.add_argument('--out', default=os.path.join(REPO, 'out', 'follow_ab'))
-    args = p.parse_args(argv)
-    if args.summarize:
-        print('\n'.join(summarize(args.summarize)))
-        return 0
-    return run(args)
+    return experiment_main(p, argv, run, summarize)
 
 
 if __name__ == '__main__':

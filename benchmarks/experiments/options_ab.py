@@ -120,14 +120,20 @@ def figures(rows: list[dict]) -> tuple[str, str, str, int]:
             sum(r['outcome'] == 'search_incomplete' for r in rows))
 
 
-def summarize(paths: list[str]) -> list[str]:
-    """The A/B table and the changed trials, as markdown lines."""
+def arm_pairs(paths: list[str], key) -> dict:
+    """The rows of A/B runs, paired: key(path, row) -> {'A': row, 'B': row}."""
     pairs = defaultdict(dict)
     for path in paths:
         for line in open(path):
             if line.strip():
                 r = json.loads(line)
-                pairs[(path, r['trial'])][r['arm']] = r
+                pairs[key(path, r)][r['arm']] = r
+    return pairs
+
+
+def summarize(paths: list[str]) -> list[str]:
+    """The A/B table and the changed trials, as markdown lines."""
+    pairs = arm_pairs(paths, lambda path, r: (path, r['trial']))
     groups = defaultdict(list)
     for p in pairs.values():
         if 'A' in p and 'B' in p:
@@ -150,30 +156,35 @@ def summarize(paths: list[str]) -> list[str]:
     return lines
 
 
-def parse_args(argv=None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+def arm_arguments(description: str, out: str) -> argparse.ArgumentParser:
+    """The arguments every A/B experiment takes: the two arms, the seed, the data and the output."""
+    p = argparse.ArgumentParser(description=description)
     p.add_argument('--summarize', nargs='+', metavar='ROWS', help='read these rows.jsonl files; run nothing')
-    p.add_argument('--suites', default='sim,cut,prior,carmen,changed')
     p.add_argument('--a', nargs='*', default=[], metavar='NAME=VALUE', help="arm A's options (default: bnb's)")
     p.add_argument('--b', nargs='*', default=[], metavar='NAME=VALUE', help="arm B's options")
-    p.add_argument('--poses', type=int, default=6)
-    p.add_argument('--changed-poses', type=int, default=4)
-    p.add_argument('--scans-per-log', type=int, default=12)
     p.add_argument('--seed', type=int, default=0)
-    p.add_argument('--threads', type=int, default=1, help='search threads (cv2.setNumThreads)')
     p.add_argument('--shared', default=os.path.join(REPO, '..', 'shared', 'data'))
-    p.add_argument('--out', default=os.path.join(REPO, 'out', 'options_ab'))
+    p.add_argument('--out', default=os.path.join(REPO, 'out', out))
+    return p
+
+
+def experiment_main(p: argparse.ArgumentParser, argv, run_fn, summarize_fn) -> int:
+    """Run the experiment, or with --summarize read rows it wrote."""
     args = p.parse_args(argv)
-    args.suites = args.suites.split(',')
-    return args
+    if args.summarize:
+        print('\n'.join(summarize_fn(args.summarize)))
+        return 0
+    return run_fn(args)
 
 
 def main(argv=None) -> int:
-    args = parse_args(argv)
-    if args.summarize:
-        print('\n'.join(summarize(args.summarize)))
-        return 0
-    return run(args)
+    p = arm_arguments(__doc__.split('\n\n')[0], 'options_ab')
+    p.add_argument('--suites', default='sim,cut,prior,carmen,changed', type=lambda s: s.split(','))
+    p.add_argument('--poses', type=int, default=6)
+    p.add_argument('--changed-poses', type=int, default=4)
+    p.add_argument('--scans-per-log', type=int, default=12)
+    p.add_argument('--threads', type=int, default=1, help='search threads (cv2.setNumThreads)')
+    return experiment_main(p, argv, run, summarize)
 
 
 if __name__ == '__main__':

@@ -108,6 +108,12 @@ class Run:
                 record.update(pose=pose.as_tuple(), truth=self.h.truth_at(r.scan_stamp).as_tuple(),
                               stamp_ns=r.scan_stamp.sec * 10 ** 9 + r.scan_stamp.nanosec, message=r.message)
 
+    def serving(self, *mix: dict) -> None:
+        """The server, then the simulator, started; goals of `mix` running (loop)."""
+        self.server()
+        self.sim()
+        self.loop(*mix)
+
     def loop(self, *mix: dict) -> None:
         """Goals one after another in a background thread, each of a random kind of `mix`."""
         rng = np.random.default_rng(self.seed + 1)

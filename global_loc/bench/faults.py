@@ -121,9 +121,7 @@ def laser_late(run: Run) -> None:
 
 
 def laser_stopped(run: Run, sig: signal.Signals) -> None:
-    run.server()
-    run.sim()
-    run.loop(BNB, TEMPLATE)
+    run.serving(BNB, TEMPLATE)
     run.sleep_between(1.5, 3.0)
     if sig == signal.SIGKILL:
         run.kill('sim')
@@ -137,9 +135,7 @@ def laser_stopped(run: Run, sig: signal.Signals) -> None:
 
 def lifecycle_mid_goal(run: Run) -> None:
     from lifecycle_msgs.msg import Transition as T
-    run.server()
-    run.sim()
-    run.loop(BNB, TEMPLATE)
+    run.serving(BNB, TEMPLATE)
     for _ in range(2):
         run.sleep_between(0.5, 2.0)
         steps = [T.TRANSITION_DEACTIVATE, T.TRANSITION_ACTIVATE] if run.rng.uniform() < 0.5 else \
@@ -153,9 +149,7 @@ def lifecycle_mid_goal(run: Run) -> None:
 
 def lifecycle_by_id(run: Run) -> None:
     from lifecycle_msgs.msg import Transition as T
-    run.server()          # autostart: active before the lifecycle manager's start-up
-    run.sim()
-    run.loop(BNB, TEMPLATE)
+    run.serving(BNB, TEMPLATE)          # autostart: active before the lifecycle manager's start-up
     for _ in range(2):
         run.sleep_between(0.5, 2.0)
         for step in (T.TRANSITION_CONFIGURE, T.TRANSITION_ACTIVATE, 99, T.TRANSITION_CLEANUP):
@@ -170,9 +164,7 @@ def lifecycle_by_id(run: Run) -> None:
 
 def unprepared_method(run: Run) -> None:
     from lifecycle_msgs.msg import Transition as T
-    run.server()
-    run.sim()
-    run.loop(SIFT, SLOW_TEMPLATE, BNB)
+    run.serving(SIFT, SLOW_TEMPLATE, BNB)
     for _ in range(2):
         run.sleep_between(1.0, 3.0)
         for step in (T.TRANSITION_DEACTIVATE, T.TRANSITION_ACTIVATE):
@@ -188,9 +180,7 @@ PARAMETER_SETS = ({'method': 'template_ccoeff'}, {'method': 'bnb'}, {'max_search
 
 
 def params_mid_goal(run: Run) -> None:
-    run.server()
-    run.sim()
-    run.loop(BNB, TEMPLATE)
+    run.serving(BNB, TEMPLATE)
     for _ in range(3):
         run.sleep_between(0.3, 1.5)
         values = PARAMETER_SETS[int(run.rng.integers(len(PARAMETER_SETS)))]

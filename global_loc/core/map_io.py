@@ -46,11 +46,11 @@ class OccupancyMap:
 
     @property
     def height(self) -> int:
-        return self.occupancy.shape[0]
+        return self.frame.height        # make_map sizes the frame by the grid
 
     @property
     def width(self) -> int:
-        return self.occupancy.shape[1]
+        return self.frame.width
 
     @property
     def diagonal_m(self) -> float:
