@@ -6,6 +6,7 @@ import re
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1] / 'global_loc'
 MAX_FILE_LINES = 350
+MAX_ARGUMENTS = 6
 MAX_FUNCTION_LINES = 60       # compiled (numba) kernels excepted: a kernel cannot call helpers cheaply
 SOURCES = sorted(PACKAGE.rglob('*.py'))
 
@@ -28,6 +29,26 @@ def test_no_function_is_over_60_lines_outside_the_numba_kernels():
                 if (n := fn.end_lineno - fn.lineno + 1) > MAX_FUNCTION_LINES:
                     long[name] = n
     assert not long, long
+
+
+def test_a_function_of_more_than_6_arguments_says_why_in_its_docstring():
+    """Long argument lists are relays; where one is right (a kernel's arrays, a goal's fields as
+    keywords) the docstring says "(N arguments: why)" - `__init__`'s in its class's docstring."""
+    unexplained = {}
+    for p in SOURCES:
+        tree = ast.parse(p.read_text())
+        classes = {fn: node for node in ast.walk(tree) if isinstance(node, ast.ClassDef) for fn in node.body}
+        for fn in ast.walk(tree):
+            if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)) or _is_kernel(fn):
+                continue
+            a = fn.args
+            n = len([x for x in a.posonlyargs + a.args + a.kwonlyargs if x.arg not in ('self', 'cls')])
+            doc = ast.get_docstring(fn) or ''
+            if fn.name == '__init__' and fn in classes:
+                doc += ast.get_docstring(classes[fn]) or ''
+            if n > MAX_ARGUMENTS and f'{n} arguments' not in ' '.join(doc.split()):
+                unexplained[f'{p.relative_to(PACKAGE)}:{fn.name}'] = n
+    assert not unexplained, unexplained
 
 
 def test_every_package_path_the_source_names_exists():

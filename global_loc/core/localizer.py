@@ -243,7 +243,8 @@ class Localizer:
                         angle_step_deg: Optional[float] = None, progress: Optional[ProgressFn] = None,
                         base_T_laser: Optional[Rigid2D] = None, t0: Optional[float] = None,
                         region: Optional[SearchRegion] = None) -> LocalizationResult:
-        """`localize` for points already in the laser frame (e.g. a local map cut from the map)."""
+        """`localize` for points already in the laser frame (e.g. a local map cut from the map).
+        (7 arguments: the points and `localize`'s options, each optional, named by the caller.)"""
         cfg = self.config
         t0 = time.perf_counter() if t0 is None else t0
         matcher = self.matcher(method or cfg.method)

@@ -49,7 +49,8 @@ class Mount3D:
 
     @staticmethod
     def from_quaternion(x: float, y: float, z: float, qx: float, qy: float, qz: float, qw: float) -> 'Mount3D':
-        """From a tf transform's translation and rotation quaternion (normalized here)."""
+        """From a tf transform's translation and rotation quaternion (normalized here). (7
+        arguments: a geometry_msgs/Transform's seven numbers, as tf and a params file give them.)"""
         q = np.array([qx, qy, qz, qw], dtype=float)
         norm = float(np.linalg.norm(q))
         if not math.isfinite(norm) or norm < 1e-9:

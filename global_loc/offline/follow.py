@@ -125,7 +125,9 @@ def result_fields(result: LocalizationResult, truth: Optional[Rigid2D]) -> dict:
 
 def follow_start(localizer, frames: list[Frame], start: int, bounds: FollowBounds, base_T_laser: Rigid2D,
                  method: Optional[str] = None, end: Optional[int] = None) -> dict:
-    """One start scan localized and, when ambiguous, followed: its output line as a dict."""
+    """One start scan localized and, when ambiguous, followed: its output line as a dict.
+    (7 arguments: the recording, the start, its bounds and mounting, and the command line's
+    optional method and last frame.)"""
     t0 = time.perf_counter()
     frame = frames[start]
     out = {'index': frame.index, 'stamp': round(frame.scan.stamp, 9)}

@@ -18,7 +18,8 @@ from ..core.transform import Rigid2D  # noqa: E402
 def plot_localization(path: str, occupancy_map: OccupancyMap, points_laser: np.ndarray,
                       estimate: Optional[Rigid2D], truth: Optional[Rigid2D] = None,
                       hypotheses=(), base_T_laser: Optional[Rigid2D] = None, title: str = '') -> None:
-    """`points_laser`: (N, 2) scan points in the laser frame. Poses are of the robot base."""
+    """`points_laser`: (N, 2) scan points in the laser frame. Poses are of the robot base.
+    (8 arguments: the file, the map and the scan, then what to draw, each optional.)"""
     occ = occupancy_map.occupancy
     shade = np.where(occ < 0, 0.8, 1.0 - np.clip(occ, 0, 100) / 100.0)
     h, w = occ.shape

@@ -1,6 +1,6 @@
-"""A Python API for the global_loc server, modelled on nav2_simple_commander's
-BasicNavigator: a mission script (or a test) asks where the robot is with one call and
-gets a typed answer, instead of starting `test_global_loc` and parsing its JSON.
+"""A Python API for the global_loc server, modelled on nav2_simple_commander's BasicNavigator: a mission
+script (or a test) asks where the robot is with one call and gets a typed answer, instead of starting
+`test_global_loc` and parsing its JSON.
 
     rclpy.init()
     localizer = GlobalLocalizer()
@@ -10,13 +10,12 @@ gets a typed answer, instead of starting `test_global_loc` and parsing its JSON.
     if result.success:
         print(result.pose, result.confidence)
 
-Every call spins the localizer's own node (its own executor) until its answer, and ends:
-an answer the server gave is a LocalizeResult (its `outcome` says how the goal ended);
-no server, a server that disappears mid-goal, a goal request left unanswered or rejected
-is a GlobalLocError subclass - never a hang. While `localize` runs, SIGINT (and whatever
-`cancel_signals` lists) cancels the goal, waits up to CANCEL_WAIT_S for the server to
-accept the cancel, then raises KeyboardInterrupt: an interrupted script leaves no goal
-turning the robot.
+Every call spins the localizer's own node (its own executor) until its answer, and ends: an answer the
+server gave is a LocalizeResult (its `outcome` says how the goal ended); no server, a server that
+disappears mid-goal, a goal request left unanswered or rejected is a GlobalLocError subclass - never a
+hang. While `localize` runs, SIGINT (and whatever `cancel_signals` lists) cancels the goal, waits up to
+CANCEL_WAIT_S for the server to accept the cancel, then raises KeyboardInterrupt: an interrupted script
+leaves no goal turning the robot.
 """
 from __future__ import annotations
 
@@ -78,7 +77,8 @@ class GoalRejected(GlobalLocError):
 
 class GlobalLocalizer(Node):
     """A client node of one global_loc server (`server_node`, its action `action`).
-    `server_timeout_s` bounds every wait for the server to appear or to accept a request."""
+    `server_timeout_s` bounds every wait for the server to appear or to accept a request
+    (`__init__`'s 7 arguments: a Node's, and the server's names, waits and signals)."""
 
     def __init__(self, node_name: str = 'global_localizer', namespace: str = '', *,
                  server_node: str = 'global_loc_server', action: str = 'localize', server_timeout_s: float = 10.0,
@@ -128,13 +128,13 @@ class GlobalLocalizer(Node):
                  resolve_by_motion_s: float = 0.0, rotate_in_place: bool = False, publish: bool = True,
                  publish_if_ambiguous: bool = False, angle_step_deg: float = 0.0, timeout_s: float = 0.0,
                  feedback: Optional[Callable[[Localize.Feedback], None]] = None) -> LocalizeResult:
-        """One Localize goal, to its end. `near`: the search prior's centre (Rigid2D or
-        (x, y, yaw) in the map frame, radians) for `radius_m` / `yaw_tolerance_deg` (0: the
-        whole map / any heading); `timeout_s`: how long the server waits for a scan (0: its
-        default); `feedback(msg)` gets each Localize.Feedback (its `stage` is a core.outcome.Stage
-        value). Raises TypeError for a field of the wrong type (before anything is sent),
-        NoServer, GoalUnanswered, GoalRejected, ServerGone; whatever else ends the call -
-        KeyboardInterrupt, an exception `feedback` raised - cancels the goal first."""
+        """One Localize goal, to its end. `near`: the search prior's centre (Rigid2D or (x, y, yaw) in the map
+        frame, radians) for `radius_m` / `yaw_tolerance_deg` (0: the whole map / any heading); `timeout_s`: how
+        long the server waits for a scan (0: its default); `feedback(msg)` gets each Localize.Feedback (its
+        `stage` is a core.outcome.Stage value). Raises TypeError for a field of the wrong type (before anything
+        is sent), NoServer, GoalUnanswered, GoalRejected, ServerGone; whatever else ends the call -
+        KeyboardInterrupt, an exception `feedback` raised - cancels the goal first (11 arguments: a goal's
+        fields and `feedback`, as nav2_simple_commander's calls take them)."""
         check_goal_types(method=method, near=near, feedback=feedback, numbers=dict(
             radius_m=radius_m, yaw_tolerance_deg=yaw_tolerance_deg, resolve_by_motion_s=resolve_by_motion_s,
             angle_step_deg=angle_step_deg, timeout_s=timeout_s), flags=dict(

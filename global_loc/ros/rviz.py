@@ -56,7 +56,8 @@ def markers_msg(result: LocalizationResult, frame_id: str, stamp) -> MarkerArray
 def local_map_msg(points: ScanPoints, resolution: float, closing_kernel: int, map_T_laser: Rigid2D,
                   frame_id: str, stamp, max_range: float = math.inf) -> OccupancyGrid:
     """The scan's local map (rasterized, cropped, closed: core.local_grid) placed with the
-    laser at `map_T_laser`; obstacle cells 100, the rest unknown."""
+    laser at `map_T_laser`; obstacle cells 100, the rest unknown. (7 arguments: the local
+    grid's own parameters, the pose it is shown at, and the message's header.)"""
     local = build_local_grid(points, resolution, closing_kernel, max_range=max_range)
     map_T_grid = map_T_laser * local.grid_T_laser().inverse()
     msg = OccupancyGrid()

@@ -32,7 +32,8 @@ def simulate_scan(occupancy_map: OccupancyMap, laser_pose: Rigid2D, fov_deg: flo
                   num_beams: int = 541, range_max: float = 20.0, range_min: float = 0.05,
                   noise_std: float = 0.0, dropout: float = 0.0, rng=None) -> Scan:
     """A LaserScan-like Scan centred on the laser's x axis; no-return beams are inf,
-    dropouts NaN, Gaussian range noise `noise_std` metres."""
+    dropouts NaN, Gaussian range noise `noise_std` metres. (9 arguments: the map, the pose
+    and the laser's model, named as the simulator node's parameters.)"""
     rng = np.random.default_rng() if rng is None else rng
     laser = LaserConfig(fov_deg, num_beams, range_min, range_max, noise_std, dropout)
     angle_min, increment, angles = laser.angles()

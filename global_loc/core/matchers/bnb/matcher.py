@@ -249,7 +249,8 @@ class BranchAndBoundMatcher(Matcher):
         """The distinct hypotheses among the leaves (decided here, once, in metres: `distinct`
         on the best leaf of each bin half as wide as distinct_m and distinct_angle - two
         leaves in one bin are never two hypotheses), refined, ranked by field score x (1 -
-        see-through share); the best carries the landscape covariance."""
+        see-through share); the best carries the landscape covariance. (7 arguments: the
+        leaves as the compiled search returns them, columns apart, the points and the angle step.)"""
         opt = self.options
         frame = self.map.frame
         leaves = [Candidate(frame.pixel_pose_to_world(float(tu[i]), float(tv[i]), float(ta[i] * d0)),

@@ -43,7 +43,8 @@ def bin_maxima(tu, tv, ta, scores, d0: float, map_height: int, distinct_cells: f
     """Indices of the best leaf in each bin of distinct_cells^2 cells x distinct_angle,
     the `limit` best of them, best first. The non-maximum suppression then sees a few
     hundred poses, not every leaf: a featureless view (a 60 deg glimpse of a straight
-    wall) leaves a million poses within keep_ratio of the best."""
+    wall) leaves a million poses within keep_ratio of the best. (9 arguments: the leaves'
+    columns as the compiled search returns them, and the bins' size in cells and radians.)"""
     cell = max(1, int(distinct_cells))
     a_bin = max(1, int(distinct_angle / d0))
     ku, kv, ka = tu // cell, tv // cell, ta // a_bin
@@ -82,7 +83,8 @@ def landscape_covariance(field: np.ndarray, frame: GridFrame, u: float, v: float
     """(x, y, yaw) covariance in the world frame from the score landscape around a peak:
     scores on a (2 half + 1)^3 grid of cell and one-cell-at-max-range steps, weighted as
     likelihoods (s / s_max)^N of N independent points, plus the search's own resolution
-    (a uniform cell and angle step: step^2 / 12)."""
+    (a uniform cell and angle step: step^2 / 12). (7 arguments: a field, its frame, the peak's
+    pixel pose u, v, yaw as the refinement gives it, the points and the grid's half width.)"""
     res = frame.resolution
     d_yaw = one_cell_angle(pts, res)
     steps = np.arange(-half, half + 1, dtype=float)

@@ -82,7 +82,8 @@ class ThreadedSearch:
             top_level: int, max_nodes: int, progress: Optional[ProgressFn],
             deadline: float = math.inf, settled: Optional[SettledFn] = None, incumbent: int = 0) -> SearchRun:
         """Expand every node whose bound reaches the best leaf's band (keep_floor), from the top
-        nodes (rows u, v, a, bound). Returns the leaves scoring that high (rows u, v,
+        nodes (rows u, v, a, bound). (11 arguments: the compiled kernels' inputs, which take
+        arrays and named tuples, not objects, and the match's limits.) Returns the leaves scoring that high (rows u, v,
         angle index, raw score) in pose order, the expansions per level, whether the
         search was exhaustive (False when max_nodes or the deadline (time.monotonic())
         stopped it) and whether `settled` ended it. It holds a leaf from the start (a
