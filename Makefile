@@ -1,7 +1,7 @@
 # The two commands of the README. Both set up first (quick when nothing changed).
 # `make compat`: the tests that need no ROS on Ubuntu 24.04's library versions (Python 3.12,
 # its own venv .venv-compat; scripts/compat.sh), as CI runs after `make test`.
-.PHONY: setup demo test compat
+.PHONY: setup demo test check compat
 
 setup:
 	@bash scripts/setup.sh
@@ -11,6 +11,11 @@ demo: setup
 
 test: setup
 	@bash -c 'source ./env.sh && ruff check . && python -m pytest test'
+
+# The fast tier for an edit-test loop: lint and the tests that start no process (no ROS node,
+# no command line, no benchmark run); `make test` runs everything.
+check: setup
+	@bash -c 'source ./env.sh && ruff check . && python -m pytest test -q -m "not ros and not process"'
 
 compat:
 	@bash scripts/compat.sh

@@ -1,7 +1,8 @@
 """Helpers shared by the tests: where the data is, pose assertions; the small synthetic
 maps (global_loc.sim.synthetic_maps) are re-exported for them. No ROS import here: the
 compatibility run (scripts/compat.sh) has no ROS, so the ROS tests' helpers live in
-ros_helpers.py, and a test file that cannot import ROS is skipped where ROS is absent."""
+ros_helpers.py, and a test file that cannot import ROS is skipped where ROS is absent (one
+that cannot import pybullet, where pybullet is absent)."""
 import importlib.util
 import os
 import re
@@ -67,8 +68,12 @@ def any_pose_near(poses, truth: Rigid2D, max_xy: float = CORRECT_XY_M, max_yaw_d
     return any(pose_correct(p, truth, max_xy, max_yaw_deg) for p in poses)
 
 
-# ---- tests that need ROS -------------------------------------------------------------------
+# ---- tests that need ROS or the simulator -----------------------------------------------------
 ROS_INSTALLED = importlib.util.find_spec('rclpy') is not None
+# The compatibility run (scripts/compat.sh) has no pybullet: a test of the simulator skips there.
+PYBULLET_INSTALLED = importlib.util.find_spec('pybullet') is not None
+NO_PYBULLET = 'needs pybullet (the simulator), which is not installed (scripts/compat.sh leaves it out)'
+needs_pybullet = pytest.mark.skipif(not PYBULLET_INSTALLED, reason=NO_PYBULLET)
 
 
 def is_ros_module(name: str) -> bool:
@@ -80,6 +85,22 @@ def is_ros_module(name: str) -> bool:
 
 def pytest_configure(config):
     config.addinivalue_line('markers', 'ros: starts ROS processes or imports rclpy (deselect with -m "not ros")')
+    config.addinivalue_line('markers', 'process: starts a process (the command line, the benchmark); `make check` '
+                                       'deselects these and the ros tests')
+
+
+@pytest.fixture(autouse=True)
+def _no_process_in_the_fast_tier(request, monkeypatch):
+    """Under `-m "... not process"` (make check) a test that starts a process unmarked fails
+    saying so, so the fast tier stays what it says."""
+    if 'not process' not in (request.config.getoption('markexpr') or ''):
+        return
+    import subprocess
+
+    def refuse(*args, **kwargs):
+        raise AssertionError(f'{request.node.nodeid} starts a process ({args[0] if args else kwargs}): '
+                             'mark it @pytest.mark.process')
+    monkeypatch.setattr(subprocess, 'Popen', refuse)
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -88,9 +109,14 @@ def pytest_make_collect_report(collector):
     is skipped with that reason; every other import error stays an error."""
     outcome = yield
     report = outcome.get_result()
-    if ROS_INSTALLED or not report.failed or not isinstance(collector, pytest.Module):
+    if not report.failed or not isinstance(collector, pytest.Module):
         return
     missing = re.search(r"ModuleNotFoundError: No module named '([\w.]+)'", str(report.longrepr))
-    if missing and is_ros_module(missing.group(1)):
+    reason = None
+    if missing and is_ros_module(missing.group(1)) and not ROS_INSTALLED:
+        reason = f'needs ROS 2, which is not installed: no module {missing.group(1)}'
+    elif missing and missing.group(1) == 'pybullet' and not PYBULLET_INSTALLED:
+        reason = NO_PYBULLET
+    if reason:
         report.outcome = 'skipped'
-        report.longrepr = (str(collector.path), 0, f'needs ROS 2, which is not installed: no module {missing.group(1)}')
+        report.longrepr = (str(collector.path), 0, reason)

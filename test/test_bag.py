@@ -50,6 +50,7 @@ def run_cli(*args):
                           capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.process
 @pytest.mark.parametrize('storage', [StoragePlugin.SQLITE3, StoragePlugin.MCAP], ids=['sqlite3', 'mcap'])
 def test_bag_scans_are_localized_with_their_stamps(tmp_path, office_map, storage):
     write_bag(tmp_path / 'run', storage, office_map)
@@ -65,6 +66,7 @@ def test_bag_scans_are_localized_with_their_stamps(tmp_path, office_map, storage
     assert [r['index'] for r in every] == [0, 2]
 
 
+@pytest.mark.process
 def test_bag_without_the_topic_or_with_another_type_is_a_clear_error(tmp_path, office_map):
     write_bag(tmp_path / 'run', StoragePlugin.SQLITE3, office_map)
     out = run_cli('--bag', str(tmp_path / 'run'), '--topic', '/base_scan')
@@ -128,6 +130,7 @@ def assert_base_poses(rows, poses=POSES):
         assert pose_correct(Rigid2D(row['x'], row['y'], row['yaw']), base, max_xy=0.1, max_yaw_deg=2.0), (row, base)
 
 
+@pytest.mark.process
 def test_bag_mounting_from_tf_static_and_fixed_tf_gives_base_poses(tmp_path, office_map):
     write_mounted_bag(tmp_path / 'run', office_map)
     out = run_cli('--bag', str(tmp_path / 'run'))
@@ -145,6 +148,7 @@ def test_bag_mounting_from_tf_static_and_fixed_tf_gives_base_poses(tmp_path, off
     assert (shell['x'], shell['y'], shell['yaw']) == pytest.approx(LASER_ON_SHELL.as_tuple(), abs=1e-4)
 
 
+@pytest.mark.process
 def test_bag_with_the_laser_upside_down_turns_its_scans_upright(tmp_path, office_map):
     write_mounted_bag(tmp_path / 'run', office_map, upside_down=True)
     out = run_cli('--bag', str(tmp_path / 'run'))
@@ -156,6 +160,7 @@ def test_bag_with_the_laser_upside_down_turns_its_scans_upright(tmp_path, office
         pytest.approx(LASER_ON_BASE.as_tuple(), abs=1e-4)
 
 
+@pytest.mark.process
 def test_bag_without_the_transform_uses_the_mounting_flags_and_says_so(tmp_path, office_map):
     write_mounted_bag(tmp_path / 'run', office_map, with_tf=False)
     flags = ('--laser-x', str(LASER_ON_BASE.x), '--laser-y', str(LASER_ON_BASE.y),

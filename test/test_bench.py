@@ -6,7 +6,10 @@ import sys
 
 import pytest
 
+from conftest import needs_pybullet
 from global_loc.bench.tables import read_rows
+
+pytestmark = needs_pybullet      # the benchmark's suites simulate with pybullet
 
 
 def run_bench(out, *args) -> list[dict]:
@@ -17,6 +20,7 @@ def run_bench(out, *args) -> list[dict]:
     return read_rows(str(out))
 
 
+@pytest.mark.process
 def test_bench_writes_rows_report_and_plots(tmp_path):
     rows = run_bench(tmp_path, '--suites', 'cut', '--poses', '5', '--methods', 'template_ccoeff,features_orb',
                      '--jobs', '2')
@@ -63,6 +67,7 @@ def test_the_report_opens_with_one_line_per_suite_against_the_thesis_method():
     assert '| cut | template_ccoeff | 3 | 33% | 67% | 33% | 33% | 2.00 | 2.90 |' in thesis, thesis
 
 
+@pytest.mark.process
 def test_the_report_is_written_again_from_its_rows_without_running_anything(tmp_path):
     import shutil
     out = tmp_path / 'run'
@@ -79,6 +84,7 @@ def test_the_report_is_written_again_from_its_rows_without_running_anything(tmp_
     assert '| changed |' in report and 'localizations in' not in done.stdout
 
 
+@pytest.mark.process
 def test_changed_world_suite_reports_each_level_with_a_plot(tmp_path):
     rows = run_bench(tmp_path, '--suites', 'changed', '--poses', '1', '--methods', 'bnb', '--jobs', '1')
     assert sorted({r['change'] for r in rows}) == [0, 1, 2, 3] and all('expansions' in r for r in rows)

@@ -4,6 +4,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from conftest import OFFICE_YAML
 from global_loc.core.transform import Rigid2D, pose_correct
 
@@ -13,6 +15,7 @@ def run_cli(*args, stdin=None):
                           text=True, timeout=300)
 
 
+@pytest.mark.process
 def test_cli_localizes_simulated_scans_and_reports_a_bad_line(tmp_path):
     sim = run_cli('simulate', '--map', OFFICE_YAML, '--count', '3', '--seed', '3')
     assert sim.returncode == 0, sim.stderr
@@ -40,6 +43,7 @@ def test_cli_localizes_simulated_scans_and_reports_a_bad_line(tmp_path):
     assert os.path.getsize(plot) > 10000
 
 
+@pytest.mark.process
 def test_cli_unknown_method_and_missing_map_exit_with_a_message(tmp_path):
     scans = tmp_path / 's.jsonl'
     scans.write_text('')
@@ -49,6 +53,7 @@ def test_cli_unknown_method_and_missing_map_exit_with_a_message(tmp_path):
     assert out.returncode == 2 and 'not found' in out.stderr
 
 
+@pytest.mark.process
 def test_cli_bnb_options_are_flags(tmp_path):
     """--bnb-max-nodes reaches the matcher: a budget of 50 expansions ends every search incomplete."""
     sim = run_cli('simulate', '--map', OFFICE_YAML, '--count', '2', '--seed', '1')

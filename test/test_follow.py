@@ -191,6 +191,7 @@ def run_follow(*args):
     return out, [json.loads(line) for line in out.stdout.splitlines()]
 
 
+@pytest.mark.process
 def test_follow_on_a_bag_settles_twin_aisle_ends_with_the_recorded_odometry(tmp_path):
     make_map, start, laser = AISLE_END
     save_map_yaml(make_map(), tmp_path / 'world.yaml')
@@ -214,6 +215,7 @@ def test_follow_on_a_bag_settles_twin_aisle_ends_with_the_recorded_odometry(tmp_
     assert short.returncode == 0 and rows[0]['follow_s'] <= 1.5 and rows[0]['scans'] <= 15, rows
 
 
+@pytest.mark.process
 def test_follow_without_odometry_in_the_bag_is_a_clear_error(tmp_path):
     make_map, start, laser = AISLE_END
     write_turning_bag(tmp_path / 'run', make_map(), start, laser, 1.0)
@@ -227,6 +229,7 @@ def test_follow_without_odometry_in_the_bag_is_a_clear_error(tmp_path):
 ACES = os.path.join(SHARED_DATA, 'carmen', 'aces-corrected.log.gz')
 
 
+@pytest.mark.process
 @pytest.mark.skipif(not os.path.exists(ACES), reason=f'shared CARMEN logs not found ({ACES})')
 def test_follow_on_a_carmen_log_settles_with_its_raw_odometry():
     """ACES (nearly four-fold symmetric): the ambiguous starts are followed over the next
@@ -276,6 +279,7 @@ def test_a_follow_is_bounded_by_distance_and_scans_when_stamps_stop_advancing():
     assert stamps_not_advancing(frames[:4]) is None
 
 
+@pytest.mark.process
 @pytest.mark.skipif(not os.path.exists(ACES), reason=f'shared CARMEN logs not found ({ACES})')
 def test_follow_on_a_log_whose_stamps_stop_advancing_warns_and_ends_by_distance(tmp_path):
     """ACES with every stamp after the 20th scan set to one value: before, a follow ran to the

@@ -11,7 +11,7 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from test_bag import TYPES, laser_scan, run_cli, transform
 
-from conftest import assert_pose_near
+from conftest import assert_pose_near, needs_pybullet
 from global_loc.core.cloud import pack_cloud
 from global_loc.core.transform import Rigid2D
 from global_loc.sim.lidar3d import LIDAR_MOUNT
@@ -76,6 +76,7 @@ def rows_of(out) -> list[dict]:
     return [json.loads(line) for line in out.stdout.splitlines()]
 
 
+@pytest.mark.process
 def test_two_narrow_lasers_from_a_bag_localize_merged_where_each_alone_does_not(tmp_path, office_map):
     write_two_laser_bag(tmp_path / 'run', office_map)
     for topic in ('/scan', '/scan_rear'):
@@ -104,6 +105,7 @@ def test_two_narrow_lasers_from_a_bag_localize_merged_where_each_alone_does_not(
     assert [r['index'] for r in wide] == [0, 2]
 
 
+@pytest.mark.process
 def test_flags_that_cannot_be_used_are_clear_errors(tmp_path, office_map):
     write_two_laser_bag(tmp_path / 'run', office_map)
     bag = ('--bag', str(tmp_path / 'run'))
@@ -135,6 +137,8 @@ def cloud_message(xyz, sec: int, frame: str, point_step=None):
                     data=np.frombuffer(packed.data, np.uint8), is_dense=packed.is_dense)
 
 
+@needs_pybullet
+@pytest.mark.process
 def test_the_simulated_lidar_from_a_bag_localizes_and_a_broken_cloud_is_left_out(tmp_path, office_map):
     from global_loc.sim.lidar3d import Lidar3DConfig
     from global_loc.sim.simulator import Simulator

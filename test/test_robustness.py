@@ -72,6 +72,7 @@ def test_an_occupancy_grid_with_a_non_finite_or_bad_origin_is_refused(origin):
         from_occupancy_grid(4, 4, 0.05, origin, np.zeros(16))
 
 
+@pytest.mark.process
 def test_cli_bad_truth_and_bad_bytes_are_errors_of_their_line_only(tmp_path):
     sim = run_cli('simulate', '--map', OFFICE_YAML, '--count', '1', '--seed', '3')
     good = json.loads(sim.stdout.splitlines()[0])
