@@ -102,6 +102,11 @@ def test_the_architecture_layout_names_every_module():
     assert not missing, missing
 
 
+def test_the_package_root_holds_only_its_entry_points():
+    """Modules live in their rooms (core, io, offline, ros, sim, bench, testing), not loose at the top."""
+    assert sorted(p.name for p in PACKAGE.glob('*.py')) == ['__init__.py', '__main__.py']
+
+
 def test_every_decision_record_the_repository_cites_exists():
     """"docs/decisions/0010" in a comment, a parameter's description or a page sends the reader
     to a record; a renumbered or dropped record must not leave the citation behind."""
