@@ -78,6 +78,7 @@ def require_finite(pose: Optional[Rigid2D], what: str) -> Optional[Rigid2D]:
 class Hypothesis:
     pose: Rigid2D          # robot base in the map frame
     score: float
+    map: str = ''          # the map it is on, in a map set (core.map_set); '' with one map
 
     def __post_init__(self):
         require_finite(self.pose, 'a hypothesis pose')
@@ -99,6 +100,7 @@ class LocalizationResult:
     region: Optional[SearchRegion] = None   # the search prior as searched (widened to the search's resolution;
                                             # the poses lie in the prior as given)
     raw: Optional[RawVerdict] = None        # a checked thesis matcher's own verdict (its pose: the base's)
+    map: str = ''                           # the map the pose is on, in a map set (core.map_set)
 
     def __setattr__(self, name, value):
         # the one door every pose goes through, set at construction or after: never NaN or inf

@@ -1,0 +1,127 @@
+"""Several maps at once - the floors of a building, the sites of a fleet: which map am I on,
+and where in it. Each map is searched by its own Localizer with the same verdict; the
+answer across maps is judged by the same lead rule as the places within one map, so a
+place that two maps share (the stairwell of identical floors, a lobby two sites copied)
+is `ambiguous` with a hypothesis on each, never a guess.
+
+A map's best hypothesis is the best place of that map (bnb's search is exhaustive; a
+checked thesis matcher's rival search covers the rest of its map), so comparing the maps'
+best places is enough: the best map's answer stays confident only when every other map's
+best place lies behind it by the lead a confident answer needs at its fit. A map whose
+search stopped early could hide a better place: a confident answer elsewhere then becomes
+`search incomplete`, saying which map.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import time
+from typing import Optional, Sequence
+
+from .localizer import LocalizationResult, Localizer
+from .matchers.base import ProgressFn
+from .outcome import Outcome
+from .scan import Scan, scan_to_points
+from .search_region import SearchRegion
+from .transform import Rigid2D
+
+
+class MapSetError(ValueError):
+    """A map set that cannot be served as asked: no maps, two maps of one name, an unknown name."""
+
+
+def map_name(yaml_path: str) -> str:
+    """A map's name by default: its YAML's file name without `.yaml` (office.yaml -> office)."""
+    base = os.path.basename(str(yaml_path))
+    return base[:-5] if base.endswith('.yaml') else base
+
+
+class MapSet:
+    """Localizers by map name, in the order given; `localize` searches the ones asked (all by
+    default) and answers on one of them, or ambiguous between them."""
+
+    def __init__(self, localizers: dict[str, Localizer]):
+        if not localizers:
+            raise MapSetError('a map set needs at least one map')
+        self.localizers = dict(localizers)
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.localizers)
+
+    def searched(self, maps: Optional[Sequence[str]]) -> list[str]:
+        """The maps a request searches: `maps` (checked against the set) or every map."""
+        if not maps:
+            return self.names
+        unknown = [m for m in maps if m not in self.localizers]
+        if unknown:
+            raise MapSetError(f'no map named {", ".join(unknown)} in the set (maps: {", ".join(self.names)})')
+        return list(dict.fromkeys(maps))
+
+    def localize(self, scan: Scan, method: Optional[str] = None, angle_step_deg: Optional[float] = None,
+                 progress: Optional[ProgressFn] = None, base_T_laser: Optional[Rigid2D] = None,
+                 region: Optional[SearchRegion] = None, maps: Optional[Sequence[str]] = None) -> LocalizationResult:
+        """Localizer.localize over the maps asked (`region`: a prior in each of them). The
+        result's `map` and each hypothesis's `map` name the map (7 arguments: localize's and
+        the maps)."""
+        t0 = time.perf_counter()
+        points = scan_to_points(scan)
+        names = self.searched(maps)
+        results = {}
+        for k, name in enumerate(names):
+            part = None if progress is None else (
+                lambda fraction, best, k=k: progress((k + fraction) / len(names), best))
+            result = self.localizers[name].localize_points(points, method, angle_step_deg, part, base_T_laser,
+                                                           region=region)
+            results[name] = tagged(result, name)
+        return across(results, {n: self.localizers[n].tracker(method) for n in names}, time.perf_counter() - t0)
+
+
+def tagged(result: LocalizationResult, name: str) -> LocalizationResult:
+    hyps = [dataclasses.replace(h, map=name) for h in result.hypotheses]
+    return dataclasses.replace(result, map=name, hypotheses=hyps)
+
+
+def across(results: dict[str, LocalizationResult], trackers: dict, time_s: float) -> LocalizationResult:
+    """One answer from each map's: the best map's, kept confident only when no other map's
+    best place comes within the lead it needs; the hypotheses of every map, best first."""
+    if len(results) == 1:
+        return dataclasses.replace(next(iter(results.values())), time_s=time_s)
+    posed = sorted((r for r in results.values() if r.pose is not None and math.isfinite(r.score)),
+                   key=lambda r: -r.score)
+    hyps = sorted((h for r in results.values() for h in r.hypotheses), key=lambda h: -h.score)
+    if not posed:
+        return no_pose(results, time_s)
+    best = posed[0]
+    out = dataclasses.replace(best, hypotheses=hyps, time_s=time_s)
+    if not best.success:
+        return dataclasses.replace(out, message=f'{best.message} (map {best.map})')
+    stopped = [n for n, r in results.items() if n != best.map and r.outcome == Outcome.SEARCH_INCOMPLETE]
+    if stopped:
+        return dataclasses.replace(out, outcome=Outcome.SEARCH_INCOMPLETE, confidence=0.0,
+                                   message=f'search incomplete: localized on map {best.map}, but the search on map '
+                                           f'{", ".join(stopped)} stopped before it could rule a better place out')
+    rival = max((r.score for r in posed[1:]), default=0.0)
+    need = trackers[best.map].lead_needed(best.score)
+    lead = (best.score - rival) / best.score if best.score > 0 else 0.0
+    if rival > 0 and lead < need:
+        other = next(r.map for r in posed[1:] if r.score == rival)
+        return dataclasses.replace(out, outcome=Outcome.AMBIGUOUS,
+                                   confidence=min(best.confidence, best.confidence * max(lead, 0.0) / need),
+                                   message=f'ambiguous between maps: map {other} has a place within '
+                                           f'{100 * max(lead, 0.0):.1f}% of the best on map {best.map} (a '
+                                           f'confident answer needs {100 * need:.0f}%)')
+    return dataclasses.replace(out, message=f'{best.message} (map {best.map}; the other maps\' best places lie '
+                                            f'{100 * lead:.0f}% or more behind)')
+
+
+def no_pose(results: dict[str, LocalizationResult], time_s: float) -> LocalizationResult:
+    """No map gave a pose: `search incomplete` if any search stopped early (a map was not
+    searched through), else the first map's outcome; the message says each map's."""
+    first = next(iter(results.values()))
+    stopped = [r for r in results.values() if r.outcome == Outcome.SEARCH_INCOMPLETE]
+    pick = stopped[0] if stopped else first
+    said = '; '.join(f'map {n}: {r.message}' for n, r in results.items())
+    return dataclasses.replace(pick, message=f'no map gave a pose ({said})', time_s=time_s, map='')
+

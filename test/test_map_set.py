@@ -1,0 +1,70 @@
+"""Which map am I on: a map set localizes on the right map, says which, and is ambiguous -
+never confident - where two maps hold the same place (identical floors)."""
+import numpy as np
+import pytest
+
+from conftest import OFFICE_YAML, assert_pose_near, seeded_office_scans
+from global_loc.core.localizer import Localizer
+from global_loc.core.map_io import load_map_yaml, make_map
+from global_loc.core.map_set import MapSet, MapSetError, map_name
+from global_loc.core.outcome import Outcome
+from global_loc.sim.raycast import sample_free_poses, simulate_scan
+
+
+@pytest.fixture(scope='module')
+def office_and_mirror():
+    """The office and its mirror image (a different building: no scan fits both but at a
+    mirror-symmetric spot), each with its Localizer; and 6 seeded office scans."""
+    office, scans = seeded_office_scans(6)
+    mirror = make_map(np.flipud(office.occupancy).copy(), office.resolution, office.origin, 'mirror')
+    return Localizer(office), Localizer(mirror), scans
+
+
+def test_a_scan_is_localized_on_its_own_map_and_the_answer_names_it(office_and_mirror):
+    office, mirror, scans = office_and_mirror
+    rng = np.random.default_rng(3)
+    maps = MapSet({'mirror': mirror, 'office': office})
+    confident = 0
+    for scan, truth in scans:
+        alone, result = office.localize(scan), maps.localize(scan)
+        assert result.map == 'office' and result.hypotheses[0].map == 'office', result.message
+        assert result.success == alone.success, result.message     # the mirror adds no doubt, nor certainty
+        if result.success:
+            confident += 1
+            assert_pose_near(result.pose, truth)
+            assert '(map office;' in result.message
+    assert confident >= 4
+    for pose in sample_free_poses(mirror.map, 3, rng, clearance=0.6):        # and one on the other map
+        result = maps.localize(simulate_scan(mirror.map, pose, 270, 541, 20.0, noise_std=0.01, rng=rng))
+        assert result.success and result.map == 'mirror', result.message
+        assert_pose_near(result.pose, pose)
+
+
+def test_identical_floors_are_ambiguous_with_a_hypothesis_on_each_and_the_prior_settles_it(office_and_mirror):
+    office, _, scans = office_and_mirror
+    floors = MapSet({'floor_1': office, 'floor_2': office})
+    for scan, truth in scans[:3]:
+        result = floors.localize(scan)
+        assert result.outcome == Outcome.AMBIGUOUS and result.confidence < 0.5, result.message
+        assert 'ambiguous between maps' in result.message
+        assert {h.map for h in result.hypotheses[:2]} == {'floor_1', 'floor_2'}
+        settled = floors.localize(scan, maps=['floor_2'])        # a prior names the floor
+        assert settled.success and settled.map == 'floor_2'
+        assert_pose_near(settled.pose, truth)
+
+
+def test_one_map_answers_as_its_localizer_does(office_and_mirror):
+    office, _, scans = office_and_mirror
+    scan, _ = scans[0]
+    alone, in_set = office.localize(scan), MapSet({'office': office}).localize(scan)
+    assert (in_set.outcome, in_set.pose, in_set.confidence, in_set.map) == (alone.outcome, alone.pose,
+                                                                            alone.confidence, 'office')
+
+
+def test_a_map_set_names_its_errors():
+    office = Localizer(load_map_yaml(OFFICE_YAML))
+    with pytest.raises(MapSetError, match='at least one map'):
+        MapSet({})
+    with pytest.raises(MapSetError, match=r'no map named floor_9 in the set \(maps: office\)'):
+        MapSet({'office': office}).searched(['floor_9'])
+    assert map_name('/maps/floor_2.yaml') == 'floor_2' and map_name('office') == 'office'
