@@ -71,3 +71,20 @@ def test_cli_bnb_options_are_flags(tmp_path):
     assert all('stopped after 50 node expansions' in r['message'] and not r['success'] for r in rows)
     assert all(not r['search']['exact'] and r['search']['expansions'] >= 50 for r in rows)
     assert '--bnb-keep-ratio' in run_cli('localize', '--help').stdout
+
+
+@pytest.mark.process
+def test_cli_localizes_in_a_map_set_and_every_line_names_its_map(tmp_path):
+    """Two --map: each line names the map of its answer; the same map twice (identical floors)
+    is ambiguous with a hypothesis on each; a name given twice is refused."""
+    scans = tmp_path / 'scans.jsonl'
+    scans.write_text(run_cli('simulate', '--map', OFFICE_YAML, '--count', '3', '--seed', '4').stdout)
+    one = [json.loads(line) for line in run_cli('localize', '--scans', str(scans)).stdout.splitlines()]
+    assert [r['map'] for r in one] == ['office'] * 3
+    out = run_cli('localize', '--scans', str(scans), '--map', OFFICE_YAML, '--map', f'floor_2={OFFICE_YAML}')
+    rows = [json.loads(line) for line in out.stdout.splitlines()]
+    assert len(rows) == 3 and all(r['outcome'] == 'ambiguous' and not r['success'] for r in rows), out.stderr
+    assert all({h['map'] for h in r['hypotheses'][:2]} == {'office', 'floor_2'} for r in rows)
+    assert all(r['map'] in ('office', 'floor_2') for r in rows)
+    twice = run_cli('localize', '--scans', str(scans), '--map', OFFICE_YAML, '--map', OFFICE_YAML)
+    assert twice.returncode == 2 and 'two maps named office' in twice.stderr

@@ -109,9 +109,9 @@ def across(results: dict[str, LocalizationResult], trackers: dict, time_s: float
         other = next(r.map for r in posed[1:] if r.score == rival)
         return dataclasses.replace(out, outcome=Outcome.AMBIGUOUS,
                                    confidence=min(best.confidence, best.confidence * max(lead, 0.0) / need),
-                                   message=f'ambiguous between maps: map {other} has a place within '
-                                           f'{100 * max(lead, 0.0):.1f}% of the best on map {best.map} (a '
-                                           f'confident answer needs {100 * need:.0f}%)')
+                                   message=f'ambiguous between maps: the best place of map {other} lies '
+                                           f'{100 * max(lead, 0.0):.1f}% behind the best, on map {best.map} (a '
+                                           f'confident answer needs a {100 * need:.0f}% lead); see the hypotheses')
     return dataclasses.replace(out, message=f'{best.message} (map {best.map}; the other maps\' best places lie '
                                             f'{100 * lead:.0f}% or more behind)')
 

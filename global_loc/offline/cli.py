@@ -18,6 +18,7 @@ from ..core import limits
 from ..core.limits import check_within
 from ..core.localizer import Localizer, LocalizerConfig
 from ..core.map_io import MapError, load_map_yaml
+from ..core.map_set import MapSet, MapSetError, map_name
 from ..core.matchers import BranchAndBoundOptions, MethodError, method_names
 from ..core.matchers.bnb import option_fields
 from ..core.mount import LaserMount
@@ -104,7 +105,8 @@ def result_fields(result) -> dict:
     out.update(outcome=result.outcome.label, score=round(result.score, 5) if math.isfinite(result.score) else None,
                success=result.success, confidence=round(result.confidence, 4),
                time_s=round(result.time_s, 4), message=result.message,
-               hypotheses=[{**h.pose.as_dict(), 'score': round(h.score, 5)} for h in result.hypotheses])
+               hypotheses=[{**h.pose.as_dict(), 'score': round(h.score, 5), **({'map': h.map} if h.map else {})}
+                           for h in result.hypotheses])
     if result.raw is not None:       # a thesis matcher's own verdict, before the map check
         raw = result.raw
         out['raw'] = {'outcome': raw.outcome.label, 'success': raw.success, 'confidence': round(raw.confidence, 4),
@@ -131,20 +133,36 @@ def several_sensors(args) -> bool:
     return several
 
 
-def localize_main(args) -> int:
-    several = several_sensors(args)
+def named_maps(args) -> dict:
+    """The maps to localize in, by name: each --map (PATH, named by its file, or NAME=PATH),
+    the shipped office map without one, and with --carmen and no --map the log's own map."""
     if args.carmen and not args.map:
         from .follow import carmen_map
-        occupancy_map = carmen_map(args.carmen)
-    else:
-        occupancy_map = load_map_yaml(args.map or default_map_yaml())
+        return {os.path.basename(args.carmen): carmen_map(args.carmen)}
+    maps = {}
+    for value in args.map or [default_map_yaml()]:
+        name, sep, path = value.partition('=')
+        if not sep or os.path.exists(value) or not name or '/' in name:
+            name, path = map_name(value), value
+        if name in maps:
+            raise MapSetError(f'two maps named {name}: name them apart with --map NAME=PATH')
+        maps[name] = load_map_yaml(path)
+    return maps
+
+
+def localize_main(args) -> int:
+    several = several_sensors(args)
+    maps = named_maps(args)
+    if len(maps) > 1 and (several or args.follow or args.carmen or args.plot):
+        raise ValueError('--follow, --plot, --carmen and several sensors take one --map')
     bnb = BranchAndBoundOptions(**{name: getattr(args, f'bnb_{name}') for name, *_ in option_fields()})
     mount, mounting = (LaserMount(Rigid2D()), None) if several else laser_mounting(args)
     base_T_laser = mount.base_T_laser
     config = LocalizerConfig(method=args.method, angle_step_deg=args.angle_step, closing_kernel=args.closing_kernel,
                              bnb=bnb, max_search_s=args.max_search_s, base_T_laser=base_T_laser,
                              verify=not args.no_verify)
-    localizer = Localizer(occupancy_map, config)
+    localizers = {name: Localizer(m, config) for name, m in maps.items()}
+    localizer = next(iter(localizers.values()))
     method = localizer.matcher(args.method).name   # unknown method: fail before reading any scan
     if several:
         from .views import localize_views
@@ -162,8 +180,15 @@ def localize_main(args) -> int:
         scans = bag_scans(args.bag, args.topic, args.every, mounting, mount)
     else:
         scans = json_line_scans(args.scans)
+    return localize_scans(args, MapSet(localizers) if len(localizers) > 1 else localizer, scans,
+                          {'method': method, 'map': next(iter(maps))})
+
+
+def localize_scans(args, localizer, scans, fields: dict) -> int:
+    """One output line per scan: `fields` (the method; the map, which a map set's answer names
+    itself), then the result's."""
     for n, (where, scan, truth) in enumerate(scans, 1):
-        out = {**where, 'method': method}
+        out = {**where, **fields}
         try:
             if isinstance(scan, ScanError):
                 raise scan
@@ -172,6 +197,8 @@ def localize_main(args) -> int:
             print(json.dumps({**out, 'outcome': Outcome.UNUSABLE_SCAN.label, 'error': str(e)}), flush=True)
             continue
         out.update(result_fields(result))
+        if isinstance(localizer, MapSet):
+            out['map'] = result.map or None        # no pose on any map: none named
         if truth is not None and result.pose is not None:
             d, a = pose_error(result.pose, truth)
             out.update(truth=truth.as_dict(), error_xy=round(d, 4), error_yaw_deg=round(a, 3))
@@ -180,9 +207,8 @@ def localize_main(args) -> int:
             stem, ext = os.path.splitext(args.plot)
             path = args.plot if n == 1 else f'{stem}_{n:03d}{ext or ".png"}'
             from .plot import plot_localization
-            plot_localization(path, occupancy_map, scan_to_points(scan).points, result.pose,
-                              truth,
-                              result.hypotheses, title=f'{method}: {result.message}')
+            plot_localization(path, localizer.map, scan_to_points(scan).points, result.pose, truth,
+                              result.hypotheses, title=f'{fields["method"]}: {result.message}')
     return 0
 
 
@@ -216,8 +242,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog='python -m global_loc', description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest='command', required=True)
     loc = sub.add_parser('localize', help='localize scans (JSON lines) in a map')
-    loc.add_argument('--map', help='nav2 map YAML (default: the shipped office map; with --carmen, a map built '
-                                   'from the log at its corrected poses)')
+    loc.add_argument('--map', action='append',
+                     help='nav2 map YAML (default: the shipped office map; with --carmen, a map built from the log '
+                          'at its corrected poses). Several --map: a map set (floors, sites) - each scan is '
+                          'searched on every map and the answer names its map (NAME=PATH names one; by default its '
+                          "file's name without .yaml); identical places on two maps are ambiguous")
     source = loc.add_mutually_exclusive_group(required=True)
     source.add_argument('--scans', help="JSON-lines file of LaserScan fields, or '-' for stdin")
     source.add_argument('--bag', help='rosbag2 recording (directory; sqlite3 or mcap) to read LaserScans from')
