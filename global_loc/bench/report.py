@@ -15,6 +15,7 @@ from ..core.transform import Rigid2D  # noqa: E402
 from ..offline.plot import plot_localization  # noqa: E402
 from .changed import changed_section  # noqa: E402
 from .follow import follow_section  # noqa: E402
+from .maps import maps_section  # noqa: E402
 from .sections import faults_section, prior_section, scaling_section, soak_section  # noqa: E402
 from .sensors import sensors_section  # noqa: E402
 from .summary import meaning, summary_section, thesis_section  # noqa: E402
@@ -153,8 +154,8 @@ def write_report(rows, meta, out, maps, trials) -> None:
         sections.append(unmapped_section(by_suite['unmapped']))
     if 'sensors' in by_suite:
         sections.append(sensors_section(by_suite['sensors'], out, plots))
-    for suite, section in (('relocalization', relocalization_section), ('follow', follow_section),
-                           ('soak', soak_section), ('faults', faults_section)):
+    for suite, section in (('maps', maps_section), ('relocalization', relocalization_section),
+                           ('follow', follow_section), ('soak', soak_section), ('faults', faults_section)):
         if meta.get(suite):
             sections.append(section(meta[suite]))
     if meta.get('scaling'):
