@@ -39,16 +39,47 @@ def map_name(yaml_path: str) -> str:
 
 class MapSet:
     """Localizers by map name, in the order given; `localize` searches the ones asked (all by
-    default) and answers on one of them, or ambiguous between them."""
+    default) and answers on one of them, or ambiguous between them. `served`: the map the
+    robot's map server serves (the first by default) - the one the watch checks a pose in."""
 
-    def __init__(self, localizers: dict[str, Localizer]):
+    def __init__(self, localizers: dict[str, Localizer], served: Optional[str] = None):
         if not localizers:
             raise MapSetError('a map set needs at least one map')
         self.localizers = dict(localizers)
+        self.served = served or next(iter(self.localizers))
+        if self.served not in self.localizers:
+            raise MapSetError(f'the served map {self.served} is not in the set (maps: {", ".join(self.names)})')
 
     @property
     def names(self) -> list[str]:
         return list(self.localizers)
+
+    @property
+    def map(self):
+        """The served map."""
+        return self.localizers[self.served].map
+
+    @property
+    def unavailable(self) -> dict[str, str]:
+        return {f'{name}: {method}': reason for name, loc in self.localizers.items()
+                for method, reason in loc.unavailable.items()}
+
+    def prepared(self) -> list[str]:
+        return sorted(set.intersection(*(set(loc.prepared()) for loc in self.localizers.values())))
+
+    def reconfigured(self, config) -> 'MapSet':
+        """Every map with `config` (Localizer.reconfigured: the matchers shared)."""
+        return MapSet({n: loc.reconfigured(config) for n, loc in self.localizers.items()}, self.served)
+
+    def matcher(self, method: str):
+        """The method's matcher on every map (MethodError where one lacks it); the served map's."""
+        for loc in self.localizers.values():
+            loc.matcher(method)
+        return self.localizers[self.served].matcher(method)
+
+    def tracker(self, method: Optional[str] = None, on: str = ''):
+        """The tracker of map `on` (default: the served map): the health watch's fit."""
+        return self.localizers[on or self.served].tracker(method)
 
     def searched(self, maps: Optional[Sequence[str]]) -> list[str]:
         """The maps a request searches: `maps` (checked against the set) or every map."""
@@ -65,8 +96,15 @@ class MapSet:
         """Localizer.localize over the maps asked (`region`: a prior in each of them). The
         result's `map` and each hypothesis's `map` name the map (7 arguments: localize's and
         the maps)."""
+        return self.localize_points(scan_to_points(scan), method, angle_step_deg, progress, base_T_laser,
+                                    region, maps)
+
+    def localize_points(self, points, method: Optional[str] = None, angle_step_deg: Optional[float] = None,
+                        progress: Optional[ProgressFn] = None, base_T_laser: Optional[Rigid2D] = None,
+                        region: Optional[SearchRegion] = None,
+                        maps: Optional[Sequence[str]] = None) -> LocalizationResult:
+        """`localize` for points already in the laser frame (7 arguments: as `localize`)."""
         t0 = time.perf_counter()
-        points = scan_to_points(scan)
         names = self.searched(maps)
         results = {}
         for k, name in enumerate(names):

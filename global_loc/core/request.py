@@ -45,6 +45,7 @@ class Request:
     publish: bool = True
     publish_if_ambiguous: bool = False
     origin: str = 'goal'        # who asked: goal, trigger, reinitialize, relocalization
+    maps: tuple = ()            # the maps to search, by name (a map set); empty: every map
 
 
 @dataclass(frozen=True)
@@ -77,6 +78,7 @@ class Asked:
     rotate_in_place: bool = False
     publish: bool = True
     publish_if_ambiguous: bool = False
+    maps: tuple = ()            # by name; empty: every map the server has
 
 
 def make_request(asked: Asked, defaults: RequestDefaults) -> Request:
@@ -93,4 +95,4 @@ def make_request(asked: Asked, defaults: RequestDefaults) -> Request:
         raise RequestError(str(e)) from None
     return Request(name, step, check_bound('scan_timeout_s', asked.timeout_s or defaults.scan_timeout_s), region,
                    check_bound('resolve_by_motion_s', asked.resolve_by_motion_s), bool(asked.rotate_in_place),
-                   bool(asked.publish), bool(asked.publish_if_ambiguous), asked.origin)
+                   bool(asked.publish), bool(asked.publish_if_ambiguous), asked.origin, tuple(asked.maps))

@@ -41,38 +41,20 @@ from global_loc_interfaces.action import Localize
 
 from ..core.transform import Rigid2D
 from .cancel_signals import signals_routed_to
-from .localize_result import STATUS_NAMES, LocalizeResult
+from .localize_result import (  # noqa: F401  (the errors are the API's too)
+    STATUS_NAMES,
+    GlobalLocError,
+    GoalRejected,
+    GoalUnanswered,
+    LocalizeResult,
+    NoServer,
+    ServerGone,
+)
 
 SERVER_GONE_S = 3.0    # the server absent from the ROS graph this long: it is gone (no answer will come)
 STATE_CALL_S = 2.0     # wait_until_active: one ~/get_state call's answer, before it asks again
 CANCEL_WAIT_S = 2.0    # an interrupted goal: how long to wait for the server to accept the cancel
 GOAL_ANSWER_S = 2.0    # a spinning server answers a goal request in milliseconds: after this, was it lost?
-
-
-class GlobalLocError(Exception):
-    """The server gave no answer; `label` is the client's JSON `outcome` for it."""
-    label = 'error'
-
-
-class NoServer(GlobalLocError):
-    """No global_loc server (action or service) answered within the timeout."""
-    label = 'no_server'
-
-
-class ServerGone(GlobalLocError):
-    """The server left the ROS graph while a request waited for its answer (it crashed or stopped)."""
-    label = 'server_gone'
-
-
-class GoalUnanswered(GlobalLocError):
-    """The server did not answer the goal request in time, nor ~/get_state (so it was not sent
-    again): it is still starting, or stopping; wait_until_active, then ask again."""
-    label = 'goal_unanswered'
-
-
-class GoalRejected(GlobalLocError):
-    """The server rejected the goal."""
-    label = 'goal_rejected'
 
 
 class GlobalLocalizer(Node):
@@ -127,24 +109,26 @@ class GlobalLocalizer(Node):
     def localize(self, method: Optional[str] = None, near=None, radius_m: float = 0.0, yaw_tolerance_deg: float = 0.0,
                  resolve_by_motion_s: float = 0.0, rotate_in_place: bool = False, publish: bool = True,
                  publish_if_ambiguous: bool = False, angle_step_deg: float = 0.0, timeout_s: float = 0.0,
-                 feedback: Optional[Callable[[Localize.Feedback], None]] = None) -> LocalizeResult:
+                 feedback: Optional[Callable[[Localize.Feedback], None]] = None, maps=()) -> LocalizeResult:
         """One Localize goal, to its end. `near`: the search prior's centre (Rigid2D or (x, y, yaw) in the map
         frame, radians) for `radius_m` / `yaw_tolerance_deg` (0: the whole map / any heading); `timeout_s`: how
         long the server waits for a scan (0: its default); `feedback(msg)` gets each Localize.Feedback (its
-        `stage` is a core.outcome.Stage value). Raises TypeError for a field of the wrong type (before anything
-        is sent), NoServer, GoalUnanswered, GoalRejected, ServerGone; whatever else ends the call -
-        KeyboardInterrupt, an exception `feedback` raised - cancels the goal first (11 arguments: a goal's
-        fields and `feedback`, as nav2_simple_commander's calls take them)."""
+        `stage` is a core.outcome.Stage value); `maps`: the map names to search in the server's map set (empty:
+        every map; the result's `map` names the answer's). Raises TypeError for a field of the wrong type
+        (before anything is sent), NoServer, GoalUnanswered, GoalRejected, ServerGone; whatever else ends the
+        call - KeyboardInterrupt, an exception `feedback` raised - cancels the goal first (12 arguments: a
+        goal's fields and `feedback`, as nav2_simple_commander's calls take them)."""
         check_goal_types(method=method, near=near, feedback=feedback, numbers=dict(
             radius_m=radius_m, yaw_tolerance_deg=yaw_tolerance_deg, resolve_by_motion_s=resolve_by_motion_s,
             angle_step_deg=angle_step_deg, timeout_s=timeout_s), flags=dict(
-            rotate_in_place=rotate_in_place, publish=publish, publish_if_ambiguous=publish_if_ambiguous))
+            rotate_in_place=rotate_in_place, publish=publish, publish_if_ambiguous=publish_if_ambiguous), maps=maps)
         centre = near if isinstance(near, Rigid2D) else Rigid2D(*(near or (0.0, 0.0, 0.0)))
         goal = Localize.Goal(method=method or '', angle_step_deg=float(angle_step_deg), timeout_s=float(timeout_s),
                              publish_initialpose=bool(publish), publish_if_ambiguous=bool(publish_if_ambiguous),
                              search_center=Pose2D(x=float(centre.x), y=float(centre.y), theta=float(centre.yaw)),
                              search_radius_m=float(radius_m), search_yaw_tolerance_deg=float(yaw_tolerance_deg),
-                             resolve_by_motion_s=float(resolve_by_motion_s), rotate_in_place=bool(rotate_in_place))
+                             resolve_by_motion_s=float(resolve_by_motion_s), rotate_in_place=bool(rotate_in_place),
+                             maps=list(maps))
         self._cancel_wanted.clear()
         self._signalled, self._running = False, True
         try:
@@ -307,7 +291,7 @@ class GlobalLocalizer(Node):
         self._cancel_wanted.set()
 
 
-def check_goal_types(method, near, feedback, numbers: dict, flags: dict) -> None:
+def check_goal_types(method, near, feedback, numbers: dict, flags: dict, maps=()) -> None:
     """TypeError naming the first localize() argument of the wrong type: the generated
     message conversion would otherwise abort the process (a C assertion) on, say, method=5."""
     def real(value) -> bool:
@@ -327,6 +311,8 @@ def check_goal_types(method, near, feedback, numbers: dict, flags: dict) -> None
             raise TypeError(f'{name} must be a bool, got {type(value).__name__}')
     if feedback is not None and not callable(feedback):
         raise TypeError(f'feedback must be callable or None, got {type(feedback).__name__}')
+    if isinstance(maps, (str, bytes)) or not all(isinstance(m, str) for m in maps):
+        raise TypeError(f'maps must be a sequence of map names (str), got {maps!r}')
 
 
 def _cancel_if_accepted(future) -> None:

@@ -45,6 +45,8 @@ def parse_args(argv):
     parser.add_argument('--server-timeout', type=float, default=10.0, help='seconds to wait for the server')
     parser.add_argument('--cancel-after', type=float, default=0.0, help='cancel the goal after this many seconds')
     parser.add_argument('--action', default='localize', help='action name')
+    parser.add_argument('--map', action='append', default=[], dest='maps', metavar='NAME',
+                        help="with a map set (the server's maps): search this map only; repeat for several")
     parser.add_argument('--near', type=float, nargs=3, metavar=('X', 'Y', 'YAW_DEG'), default=(0.0, 0.0, 0.0),
                         help='search prior: the centre (map frame, degrees) of --radius and --yaw-tolerance')
     parser.add_argument('--radius', type=float, default=0.0, help='search only within this many metres of --near')
@@ -78,11 +80,12 @@ def print_result(result: LocalizeResult, as_json: bool) -> None:
         print(json.dumps(result.as_dict()), flush=True)
         return
     if result.pose is not None:
-        print(f'pose:       {format_pose(result.pose)}  (frame {result.frame_id})')
+        print(f'pose:       {format_pose(result.pose)}  (frame {result.frame_id}, map {result.map})')
         print(f'score:      {result.score:.3f}   confidence: {result.confidence:.2f}   '
               f'time: {result.elapsed_s:.2f} s')
         for i, (p, s) in enumerate(result.hypotheses):
-            print(f'  hypothesis {i + 1}: {format_pose(p)}  score {s:.3f}')
+            on = f'  map {result.hypothesis_maps[i]}' if i < len(result.hypothesis_maps) else ''
+            print(f'  hypothesis {i + 1}: {format_pose(p)}  score {s:.3f}{on}')
     print(f'{result.status}: {result.message}')
 
 
@@ -101,7 +104,7 @@ def run(localizer: GlobalLocalizer, args) -> int:
             method=args.method, angle_step_deg=args.angle_step, timeout_s=args.timeout, publish=not args.no_publish,
             publish_if_ambiguous=args.publish_if_ambiguous, near=near,
             radius_m=args.radius, yaw_tolerance_deg=args.yaw_tolerance, resolve_by_motion_s=args.resolve_by_motion,
-            rotate_in_place=args.rotate_in_place, feedback=feedback_printer(args.json))
+            rotate_in_place=args.rotate_in_place, feedback=feedback_printer(args.json), maps=args.maps)
     except GlobalLocError as e:
         print(f'error: {e}', file=sys.stderr)
         if args.json:

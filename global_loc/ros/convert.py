@@ -91,6 +91,7 @@ def result_to_msg(result: LocalizationResult, frame_id: str, stamp, elapsed_s: f
     out.hypotheses.header.stamp = stamp
     out.hypotheses.poses = [pose_to_msg(h.pose) for h in result.hypotheses]
     out.hypothesis_scores = [float(h.score) for h in result.hypotheses]
+    out.map, out.hypothesis_maps = result.map, [h.map for h in result.hypotheses]
     if result.pose is not None:
         out.pose = pose_with_covariance(result.pose, result.covariance, frame_id, stamp)
     return out
@@ -99,23 +100,3 @@ def result_to_msg(result: LocalizationResult, frame_id: str, stamp, elapsed_s: f
 def ended_result(outcome: Outcome, message: str) -> Localize.Result:
     """The action result for a goal the server ended before the matcher did (busy, no scan, ...)."""
     return Localize.Result(outcome=int(outcome), success=False, message=message)
-
-
-def result_to_dict(result: Localize.Result, status: str) -> dict:
-    """An action result as the client's JSON object."""
-    hypotheses = [{**pose_from_msg(p).as_dict(), 'score': round(float(s), 5)}
-                  for p, s in zip(result.hypotheses.poses, result.hypothesis_scores, strict=True)]
-    try:
-        outcome = Outcome(result.outcome).label
-    except ValueError:
-        outcome = f'unknown_{result.outcome}'
-    out = {'outcome': outcome, 'status': status, 'success': bool(result.success), 'message': result.message,
-           'score': float(result.score) if math.isfinite(result.score) else None,
-           'confidence': float(result.confidence), 'elapsed_s': float(result.elapsed_s), 'hypotheses': hypotheses,
-           'scan_stamp': result.scan_stamp.sec + 1e-9 * result.scan_stamp.nanosec, 'scan_age_s': result.scan_age_s,
-           'pose': None, 'covariance': None}
-    if hypotheses:
-        out['pose'] = pose_from_msg(result.pose.pose.pose).as_dict()
-        cov = np.asarray(result.pose.pose.covariance, dtype=float).reshape(6, 6)[np.ix_([0, 1, 5], [0, 1, 5])]
-        out['covariance'] = cov.tolist()
-    return out

@@ -3,6 +3,7 @@ typed - and the client's JSON object (`test_global_loc --json`)."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from typing import Optional
 
@@ -36,6 +37,8 @@ class LocalizeResult:
     elapsed_s: float
     status: str                    # how the action ended: succeeded | aborted | canceled
     frame_id: str = 'map'
+    map: str = ''                  # the map `pose` is on (the server's map set names it)
+    hypothesis_maps: tuple = ()    # the map of each hypothesis
 
     @staticmethod
     def from_msg(result: Localize.Result, status: int) -> 'LocalizeResult':
@@ -53,14 +56,43 @@ class LocalizeResult:
         return LocalizeResult(outcome, bool(result.success), result.message, pose, covariance, float(result.score),
                               float(result.confidence), hypotheses, stamp_seconds(result.scan_stamp),
                               float(result.scan_age_s), float(result.elapsed_s),
-                              STATUS_NAMES.get(status, str(status)), result.pose.header.frame_id or 'map')
+                              STATUS_NAMES.get(status, str(status)), result.pose.header.frame_id or 'map',
+                              result.map, tuple(result.hypothesis_maps))
 
     def as_dict(self) -> dict:
         """The client's JSON object (test_global_loc --json)."""
         return {'outcome': self.outcome.label, 'status': self.status, 'success': self.success,
                 'message': self.message, 'score': self.score if math.isfinite(self.score) else None,
-                'confidence': self.confidence, 'elapsed_s': self.elapsed_s,
-                'hypotheses': [{**p.as_dict(), 'score': round(s, 5)} for p, s in self.hypotheses],
+                'confidence': self.confidence, 'elapsed_s': self.elapsed_s, 'map': self.map,
+                'hypotheses': [{**p.as_dict(), 'score': round(s, 5), **({'map': m} if m else {})}
+                               for (p, s), m in itertools.zip_longest(self.hypotheses, self.hypothesis_maps[
+                                   :len(self.hypotheses)], fillvalue='')],
                 'scan_stamp': self.scan_stamp, 'scan_age_s': self.scan_age_s,
                 'pose': None if self.pose is None else self.pose.as_dict(),
                 'covariance': None if self.covariance is None else self.covariance.tolist()}
+
+
+class GlobalLocError(Exception):
+    """The server gave no answer; `label` is the client's JSON `outcome` for it."""
+    label = 'error'
+
+
+class NoServer(GlobalLocError):
+    """No global_loc server (action or service) answered within the timeout."""
+    label = 'no_server'
+
+
+class ServerGone(GlobalLocError):
+    """The server left the ROS graph while a request waited for its answer (it crashed or stopped)."""
+    label = 'server_gone'
+
+
+class GoalUnanswered(GlobalLocError):
+    """The server did not answer the goal request in time, nor ~/get_state (so it was not sent
+    again): it is still starting, or stopping; wait_until_active, then ask again."""
+    label = 'goal_unanswered'
+
+
+class GoalRejected(GlobalLocError):
+    """The server rejected the goal."""
+    label = 'goal_rejected'

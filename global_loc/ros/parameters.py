@@ -17,6 +17,7 @@ from rclpy.parameter import Parameter
 
 from ..core import limits
 from ..core.localizer import LocalizerConfig
+from ..core.map_set import map_name
 from ..core.matchers import TRACKER_METHOD, BranchAndBoundOptions, method_names, resolve_method
 from ..core.matchers.bnb import option_fields, option_range
 from ..core.mount import LaserMount, MountError
@@ -49,6 +50,11 @@ SPECS = [
     Spec('map_yaml', '', 'nav2 map YAML to localize in (empty: the shipped map)'),
     Spec('use_map_topic', False, 'take the map from an OccupancyGrid topic instead of map_yaml'),
     Spec('map_topic', '/map', 'OccupancyGrid topic (transient local, like nav2 map_server)'),
+    Spec('maps', [], 'a map set (floors, sites): map YAMLs, PATH or NAME=PATH (named by the file without .yaml), '
+                     'each searched on every goal, the answer naming its map; empty: map_yaml alone'),
+    Spec('served_map', '', 'in a map set, the map nav2 map_server serves on /map (empty: the first of maps); '
+                           '/initialpose is published only for an answer on it (set it when map_server switches)',
+         live=True),
     Spec('scan_topics', ['/scan'], 'sensor_msgs/LaserScan topics merged into one view (the first: the primary '
                                    'laser, which the health watch and resolve-by-motion use)'),
     Spec('scan_topic', '', 'the one-laser alias of scan_topics (set: scan_topics is [scan_topic])'),
@@ -140,9 +146,41 @@ class ServerConfig:
     def map_yaml(self) -> str:
         return self.values['map_yaml'] or default_map_yaml()
 
+    @property
+    def map_files(self) -> dict[str, str]:
+        """The maps to serve, by name: `maps` (checked by build_config), or map_yaml alone."""
+        return map_files(self.values['maps']) if self.values['maps'] else {map_name(self.map_yaml): self.map_yaml}
+
+    @property
+    def served_map(self) -> str:
+        return self.values['served_map'] or next(iter(self.map_files))
+
     def request_defaults(self) -> RequestDefaults:
         v = self.values
         return RequestDefaults(v['method'], v['angle_step_deg'], v['scan_timeout_s'])
+
+
+def map_files(entries: list) -> dict[str, str]:
+    """`maps` entries (PATH or NAME=PATH) by name; ConfigError for two of one name."""
+    out = {}
+    for entry in entries:
+        name, sep, path = str(entry).partition('=')
+        if not sep or not name or '/' in name:
+            name, path = map_name(entry), str(entry)
+        if name in out:
+            raise ConfigError(f'parameter maps: two maps named {name} (name them apart: NAME=PATH)')
+        out[name] = path
+    return out
+
+
+def check_map_set(v: dict) -> None:
+    if v['maps'] and v['use_map_topic']:
+        raise ConfigError('parameter maps: a map set is read from files; use_map_topic takes one map from a topic '
+                          '(set one of them)')
+    names = map_files(v['maps']) if v['maps'] else {}
+    if v['served_map'] and v['served_map'] not in names:
+        raise ConfigError(f'parameter served_map: {v["served_map"]} is not a map of the set (maps: '
+                          f'{", ".join(names) or "none"})')
 
 
 def build_config(values: dict, mounts: dict | None = None) -> ServerConfig:
@@ -152,6 +190,7 @@ def build_config(values: dict, mounts: dict | None = None) -> ServerConfig:
         if lo_hi is not None and not (lo_hi[0] <= value <= lo_hi[1]):
             raise ConfigError(f'parameter {name}: {value} is outside [{lo_hi[0]}, {lo_hi[1]}]')
     v = values
+    check_map_set(v)
     try:
         LaserMount.from_mount3d(Mount3D(v['laser_x'], v['laser_y'], 0.0, v['laser_roll'], 0.0, v['laser_yaw']))
     except MountError as e:

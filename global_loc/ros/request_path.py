@@ -19,6 +19,7 @@ from typing import Callable, Optional
 from global_loc_interfaces.action import Localize
 
 from ..core.limits import BudgetError
+from ..core.map_set import MapSet, MapSetError
 from ..core.map_slot import MapSlot
 from ..core.matchers import MethodError
 from ..core.mount import LaserMount
@@ -50,6 +51,7 @@ class Collaborators:
     odometry: PoseHistory                        # moves each reading to the view's stamp
     motion: Callable[[], object]                 # -> the ros.motion.MotionContext while configured
     publish_pose: Callable[[object], None]       # PoseWithCovarianceStamped -> initialpose_topic
+    publish_map: Callable[[str], None]           # the map a confident answer is on -> ~/current_map (latched)
     show: Callable                               # (result, scan, base_T_laser, stamp, map) -> RViz topics
     clock_now: Callable[[], float]               # the node's clock (sim time with use_sim_time), s
     logger: object
@@ -126,10 +128,11 @@ class RequestPath:
         maps = self.c.maps.wait_current(request.scan_timeout_s, cancelled)   # a newer map may be building
         if maps.built is None or not self.c.maps.is_current(maps.generation):
             return self.end_early(Outcome.NO_MAP, maps.error or 'a newer map is still being prepared; retry')
-        localizer = maps.built.reconfigured(self.c.config().localizer)
+        localizer = maps.built.reconfigured(self.c.config().localizer)     # a MapSet (one map or several)
         try:
             localizer.matcher(request.method)       # prepared with the map, or refused now: never built here
-        except MethodError as e:
+            localizer.searched(request.maps)
+        except (MethodError, MapSetError) as e:
             return self.end_early(Outcome.BAD_GOAL, f'bad request: {e}')
         newest = self.wait_for_view(request, start, asker)
         if newest is None:
@@ -140,7 +143,7 @@ class RequestPath:
             self.log_view(view, messages)
             result = localizer.localize_points(view.points, request.method, request.angle_step_deg,
                                                self.progress(asker), base_T_laser=view.base_T_laser,
-                                               region=request.region)
+                                               region=request.region, maps=request.maps)
         except ScanError as e:      # ViewError, MountError, NoMounting are ScanErrors
             return self.end_early(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
         except BudgetError as e:    # the goal asks for more work than a goal may do
@@ -154,7 +157,7 @@ class RequestPath:
             result = dataclasses.replace(result, message=f'{result.message} [{view.summary()}]')
         if cancelled():     # asked to end, or its configuration ended, after the search's last step
             raise CanceledError()
-        return self.publish(request, result, shown, maps.generation, localizer.map, start)
+        return self.publish(request, result, shown, maps.generation, localizer, start)
 
     def resolve_by_motion(self, result, messages: dict, request: Request, localizer, asker: Asker,
                           shown: tuple) -> tuple:
@@ -165,6 +168,11 @@ class RequestPath:
                     else 'it needs a laser (scan_topics)')
             return dataclasses.replace(result, message=f'{result.message} (cannot resolve by motion: {note})'), shown
         msg = messages[primary.topic]
+        on = {h.map for h in result.hypotheses}
+        if len(on) > 1:
+            note = f'cannot resolve by motion across maps {", ".join(sorted(on))}: name the map in the goal\'s maps'
+            return dataclasses.replace(result, message=f'{result.message} ({note})'), shown
+        localizer = localizer.localizers[result.map]
         try:
             mount = self.c.laser_mount(msg.header.frame_id)
         except ScanError as e:
@@ -212,12 +220,16 @@ class RequestPath:
         return report
 
     # ---- publish ------------------------------------------------------------------------
-    def publish(self, request: Request, result, shown: tuple, generation: int, occupancy_map,
+    def publish(self, request: Request, result, shown: tuple, generation: int, map_set: MapSet,
                 start: float) -> Localize.Result:
         """The action result; the pose on /initialpose when it is confident (or asked for
-        anyway) and its map is still the newest received. `shown`: (points, base_T_laser,
-        message) the pose is of - the view's newest, or resolve-by-motion's last scan."""
+        anyway), its map is still the newest received and it is on the served map (the map
+        /map serves: a pose on another floor would put AMCL on the wrong map). `shown`:
+        (points, base_T_laser, message) the pose is of - the view's newest, or
+        resolve-by-motion's last scan. A confident answer's map goes on the current-map topic."""
         config = self.c.config()
+        served = config['served_map'] or map_set.served      # live: set when map_server switches maps
+        occupancy_map = map_set.localizers.get(result.map, map_set.localizers[served]).map
         points, base_T_laser, msg = shown
         out = result_to_msg(result, config['map_frame'], msg.header.stamp, time.monotonic() - start)
         out.scan_stamp = msg.header.stamp
@@ -230,7 +242,14 @@ class RequestPath:
             if wanted and not self.c.maps.is_current(generation):
                 return self.end_early(Outcome.NO_MAP, f'not published: a newer map arrived while localizing in map '
                                                    f'{generation} (its pose would be in the old map); retry')
-            if wanted:
+            if result.success:
+                self.c.publish_map(result.map)
+            if wanted and result.map != served:
+                note = (f'not published on {config["initialpose_topic"]}: the answer is on map {result.map}, /map '
+                        f'serves {served} (switch map_server to it - its load_map service - and set served_map; '
+                        f'docs/SERVER.md)')
+                out.message, summary = f'{out.message}; {note}', f'{summary}; {note}'
+            elif wanted:
                 self.c.publish_pose(out.pose)
                 summary += f'; published on {config["initialpose_topic"]}'
         self.c.logger.info(summary)
@@ -252,7 +271,7 @@ def asked_by_goal(goal) -> Asked:
                 center=Rigid2D(c.x, c.y, c.theta), radius_m=goal.search_radius_m,
                 yaw_tolerance_deg=goal.search_yaw_tolerance_deg, resolve_by_motion_s=goal.resolve_by_motion_s,
                 rotate_in_place=goal.rotate_in_place, publish=goal.publish_initialpose,
-                publish_if_ambiguous=goal.publish_if_ambiguous)
+                publish_if_ambiguous=goal.publish_if_ambiguous, maps=tuple(goal.maps))
 
 
 def trigger_message(result: Localize.Result, pose: Optional[Rigid2D]) -> str:

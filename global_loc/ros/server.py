@@ -35,6 +35,7 @@ from global_loc_interfaces.action import Localize
 
 from ..core.localizer import Localizer
 from ..core.map_io import load_map_yaml
+from ..core.map_set import MapSet
 from ..core.map_slot import MapSlot
 from ..core.mount import LaserMount
 from ..core.newest_message import NewestMessage
@@ -64,7 +65,7 @@ class GlobalLocServer(LifecycleNode):
         self.start_problems = declare_parameters(self)
         self.config = None                              # ServerConfig while configured
         self.group = ReentrantCallbackGroup()
-        self.maps: MapSlot[Localizer] = MapSlot(self.build_localizer, self.on_map_change)
+        self.maps: MapSlot[MapSet] = MapSlot(self.build_localizer, self.on_map_change)
         self.sensors = SensorInputs()                          # every sensor's newest message (the view)
         self.scans: NewestMessage[LaserScan] = NewestMessage()       # the primary laser's (watch, resolve-by-motion)
         self.odom_history = PoseHistory()                      # odometry by stamp
@@ -83,6 +84,7 @@ class GlobalLocServer(LifecycleNode):
             mount=lambda spec, frame: self.mounts.mount(spec, frame), laser_mount=self.laser_mount,
             odometry=self.odom_history, motion=lambda: self.motion,
             publish_pose=lambda msg: self.pubs['initialpose'].publish(msg), show=self.show,
+            publish_map=lambda name: self.pubs['current_map'].publish(String(data=name)),
             clock_now=lambda: self.get_clock().now().nanoseconds * 1e-9, logger=self.get_logger()))
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
@@ -124,8 +126,8 @@ class GlobalLocServer(LifecycleNode):
             self.maps.clear(f'waiting for a map on {config["map_topic"]}')
             self.get_logger().info(f'waiting for the map on {config["map_topic"]}')
         else:
-            path = config.map_yaml
-            self.maps.load_now(lambda: load_map_yaml(path))
+            files = config.map_files
+            self.maps.load_now(lambda: {name: load_map_yaml(path) for name, path in files.items()})
         self.path.inactive_reason = 'not active: configured, not yet activated'
         self.get_logger().info('configured')
         return TransitionCallbackReturn.SUCCESS
@@ -138,6 +140,7 @@ class GlobalLocServer(LifecycleNode):
                      'markers': self.create_lifecycle_publisher(MarkerArray, '~/hypothesis_markers', LATCHED),
                      'local_map': self.create_lifecycle_publisher(OccupancyGrid, '~/local_map', LATCHED),
                      'status': self.create_lifecycle_publisher(String, '~/status', 10),
+                     'current_map': self.create_lifecycle_publisher(String, '~/current_map', LATCHED),
                      'diagnostics': self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics', 10)}
         self.cmd_vel_pub = self.create_publisher(Twist, config['cmd_vel_topic'], 10)
         self.motion = MotionContext(self.scans, self.odom_history, self.cmd_vel_pub.publish, config['odom_topic'],
@@ -234,21 +237,24 @@ class GlobalLocServer(LifecycleNode):
         self.get_logger().info(f'parameters set: {names}')
 
     # ---- maps, odometry, health -------------------------------------------------------------
-    def build_localizer(self, load) -> Localizer:
-        """The map `load()` gives, with every prepared method (`method`, bnb - the watch's
-        fit - and `methods`) precomputed now, in the map builder: a goal never builds one
-        (it could not cancel, time or bound the build); one that cannot be built on this
-        map is refused to goals with the reason."""
+    def build_localizer(self, load) -> MapSet:
+        """The maps `load()` gives (by name; the map topic's: one), each with every prepared method
+        (`method`, bnb - the watch's fit - and `methods`) precomputed now, in the map builder: a goal
+        never builds one; one that cannot be built on a map is refused to goals with the reason."""
         config = self.config
-        occupancy_map = load()
-        t0 = time.perf_counter()
-        localizer = Localizer(occupancy_map, config.localizer, prepared=config.prepared)
-        for reason in localizer.unavailable.values():
-            self.get_logger().error(f'{reason}; goals naming it are refused')
-        self.get_logger().info(f'map {occupancy_map.source}: {occupancy_map.width} x {occupancy_map.height} cells '
-                               f'at {occupancy_map.resolution} m; {", ".join(localizer.prepared())} ready in '
-                               f'{time.perf_counter() - t0:.2f} s')
-        return localizer
+        loaded = load()
+        maps = loaded if isinstance(loaded, dict) else {'map': loaded}     # the map topic's: one map
+        localizers = {}
+        for name, occupancy_map in maps.items():
+            t0 = time.perf_counter()
+            localizers[name] = Localizer(occupancy_map, config.localizer, prepared=config.prepared)
+            for reason in localizers[name].unavailable.values():
+                self.get_logger().error(f'map {name}: {reason}; goals naming it are refused')
+            ready = ', '.join(localizers[name].prepared())
+            self.get_logger().info(f'map {name} ({occupancy_map.source}): {occupancy_map.width} x '
+                                   f'{occupancy_map.height} cells at {occupancy_map.resolution} m; {ready} ready in '
+                                   f'{time.perf_counter() - t0:.2f} s')
+        return MapSet(localizers, config.served_map if isinstance(loaded, dict) else 'map')
 
     def on_map_change(self, installed, note: str, dropped: bool) -> None:
         if installed.built is None and not dropped:
@@ -268,8 +274,8 @@ class GlobalLocServer(LifecycleNode):
     def fit_at(self, scan_msg, pose):
         """The watch's fit of a primary-laser scan at a base pose (None while no map is ready)."""
         localizer = self.maps.current().built
-        return None if localizer is None else laser_fit(localizer.tracker(), self.laser_mount, scan_msg,
-                                                        pose)
+        return None if localizer is None else laser_fit(localizer.tracker(on=self.config['served_map']),
+                                                        self.laser_mount, scan_msg, pose)
 
     def laser_mount(self, frame: str) -> LaserMount:
         return self.mounts.laser_mount(self.config.sensors, frame)
