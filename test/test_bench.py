@@ -189,11 +189,13 @@ def test_the_sensors_table_is_built_from_rows_per_setup_in_order_with_its_plot(t
 
 @pytest.mark.process
 def test_maps_suite_names_the_map_and_never_answers_identical_floors(tmp_path):
-    rows = [r for r in run_bench(tmp_path, '--suites', 'maps', '--poses', '10', '--jobs', '1') if r['suite'] == 'maps']
+    rows = [r for r in run_bench(tmp_path, '--suites', 'maps', '--poses', '10', '--jobs', '1')
+            if r['suite'] == 'map_set']
     assert {r['set'] for r in rows} == {'all', 'twins'} and len({r['map'] for r in rows}) >= 1
     assert not any(r['success'] for r in rows if r['set'] == 'twins')          # identical floors: never a guess
     assert all(r['answer_map'] in ('floor_1', 'floor_2') for r in rows if r['set'] == 'twins' and r['answer_map'])
     assert not any(r['success'] and not r['ok'] for r in rows)
     assert any(r['ok'] and r['success'] for r in rows if r['set'] == 'all')
-    details = (tmp_path / 'DETAILS.md').read_text()
-    assert '## Which map am I on (maps suite)' in details and '| twins | every map |' in details
+    report = (tmp_path / 'REPORT.md').read_text()          # the suite's own table leads its report
+    assert report.index('## Which map am I on (maps suite)') < report.index('Command:')
+    assert '| twins | every map |' in report

@@ -37,7 +37,7 @@ def maps_rows(maps: dict[str, OccupancyMap], poses_per_map: int, seed: int) -> l
             for set_name, maps_set, right_maps in (('all', every, {name}), ('twins', twins, set(TWINS))):
                 result = maps_set.localize(scan)
                 right = result.pose is not None and result.map in right_maps and pose_correct(result.pose, pose)
-                rows.append({'suite': 'maps', 'kind': 'map_set', 'set': set_name, 'map': name,
+                rows.append({'suite': 'map_set', 'kind': 'map_set', 'set': set_name, 'map': name,
                              'maps': len(maps_set.names), 'method': 'bnb', 'outcome': result.outcome.label,
                              'success': result.success, 'ok': right, 'answer_map': result.map,
                              'wrong_map': result.pose is not None and result.map not in right_maps,

@@ -154,7 +154,7 @@ def write_report(rows, meta, out, maps, trials) -> None:
         sections.append(unmapped_section(by_suite['unmapped']))
     if 'sensors' in by_suite:
         sections.append(sensors_section(by_suite['sensors'], out, plots))
-    for suite, section in (('maps', maps_section), ('relocalization', relocalization_section),
+    for suite, section in (('map_set', maps_section), ('relocalization', relocalization_section),
                            ('follow', follow_section), ('soak', soak_section), ('faults', faults_section)):
         if meta.get(suite):
             sections.append(section(meta[suite]))

@@ -19,7 +19,7 @@ SUITE_TRIALS = {
     'scaling': 'tiled building maps 500² to 6000²',
 }
 # Suites with their own figures (not one localization per trial), by the folder they are committed in.
-OTHER_REPORTS = {'maps': 'which map am I on: a map set, identical floors',
+OTHER_REPORTS = {'map_set': 'which map am I on: a map set, identical floors (suite maps)',
                  'relocalization': 'keeping a robot localized', 'follow': 'settling by motion on real logs',
                  'soak': 'real server processes under faults', 'one_job': 'one localization at a time, every core',
                  'big_map': 'the 6000² tiled building',
