@@ -155,6 +155,8 @@ def test_trigger_services_localize_and_publish_and_rviz_topics_reach_a_late_subs
         assert_pose_near(pose_from_msg(hypotheses[0].poses[0]), TRUTH)
         arrows = [m for m in markers[0].markers if m.action == Marker.ADD and m.type == Marker.ARROW]
         assert len(arrows) == len(hypotheses[0].poses) and arrows[0].color.g > arrows[0].color.r   # chosen: green
+        labels = [m.text for m in markers[0].markers if m.type == Marker.TEXT_VIEW_FACING]
+        assert labels[0].startswith('1: ') and ' on ' in labels[0], labels      # each names its map
         grid = local_map[0]
         assert grid.header.frame_id == 'map' and grid.info.resolution == pytest.approx(0.05)
         assert sum(v == 100 for v in grid.data) > 100 and set(grid.data) <= {100, -1}

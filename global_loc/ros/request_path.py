@@ -19,7 +19,7 @@ from typing import Callable, Optional
 from global_loc_interfaces.action import Localize
 
 from ..core.limits import BudgetError
-from ..core.map_set import MapSet, MapSetError
+from ..core.map_set import MapSet, MapSetError, tagged
 from ..core.map_slot import MapSlot
 from ..core.matchers import MethodError
 from ..core.mount import LaserMount
@@ -172,13 +172,14 @@ class RequestPath:
         if len(on) > 1:
             note = f'cannot resolve by motion across maps {", ".join(sorted(on))}: name the map in the goal\'s maps'
             return dataclasses.replace(result, message=f'{result.message} ({note})'), shown
-        localizer = localizer.localizers[result.map]
+        on_map, localizer = result.map, localizer.localizers[result.map]
         try:
             mount = self.c.laser_mount(msg.header.frame_id)
         except ScanError as e:
             return dataclasses.replace(result, message=f'{result.message} (cannot resolve by motion: {e})'), shown
         result, last = resolve_by_motion(self.c.motion(), MotionStart(result, msg, mount.base_T_laser, localizer),
                                          request, self.c.config()['rotate_speed'], asker.cancelled, asker.feedback)
+        result = tagged(result, on_map)         # the follower's answer is on the map it followed on
         if last is msg:
             return result, shown
         return result, (scan_to_points(mount.upright(scan_from_msg(last))), mount.base_T_laser, last)

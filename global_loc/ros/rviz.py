@@ -48,7 +48,8 @@ def markers_msg(result: LocalizationResult, frame_id: str, stamp) -> MarkerArray
             else:
                 m.pose.position.z = 0.5
                 m.scale.z = 0.3
-                m.text = f'{i + 1}: {h.score:.3f}' + (f' ({result.outcome.label})' if i == 0 else '')
+                m.text = (f'{i + 1}: {h.score:.3f}' + (f' on {h.map}' if h.map else '')
+                          + (f' ({result.outcome.label})' if i == 0 else ''))
             out.markers.append(m)
     return out
 

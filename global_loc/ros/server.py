@@ -251,9 +251,9 @@ class GlobalLocServer(LifecycleNode):
             for reason in localizers[name].unavailable.values():
                 self.get_logger().error(f'map {name}: {reason}; goals naming it are refused')
             ready = ', '.join(localizers[name].prepared())
-            self.get_logger().info(f'map {name} ({occupancy_map.source}): {occupancy_map.width} x '
-                                   f'{occupancy_map.height} cells at {occupancy_map.resolution} m; {ready} ready in '
-                                   f'{time.perf_counter() - t0:.2f} s')
+            label = occupancy_map.source if len(maps) == 1 else f'{name} ({occupancy_map.source})'
+            self.get_logger().info(f'map {label}: {occupancy_map.width} x {occupancy_map.height} cells at '
+                                   f'{occupancy_map.resolution} m; {ready} ready in {time.perf_counter() - t0:.2f} s')
         return MapSet(localizers, config.served_map if isinstance(loaded, dict) else 'map')
 
     def on_map_change(self, installed, note: str, dropped: bool) -> None:
