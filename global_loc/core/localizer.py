@@ -244,9 +244,13 @@ class Localizer:
     def localize_points(self, points: ScanPoints, method: Optional[str] = None,
                         angle_step_deg: Optional[float] = None, progress: Optional[ProgressFn] = None,
                         base_T_laser: Optional[Rigid2D] = None, t0: Optional[float] = None,
-                        region: Optional[SearchRegion] = None) -> LocalizationResult:
+                        region: Optional[SearchRegion] = None, incumbent: float = 0.0,
+                        max_nodes: int = 0) -> LocalizationResult:
         """`localize` for points already in the laser frame (e.g. a local map cut from the map).
-        (7 arguments: the points and `localize`'s options, each optional, named by the caller.)"""
+        `incumbent`: a score a place elsewhere is known to reach (another map of a set): bnb
+        searches only the band below it, so a map without a rival is ruled out quickly;
+        `max_nodes`: bnb's node budget for this search (0: its option's). (9 arguments: the
+        points and `localize`'s options, each optional, named by the caller.)"""
         cfg = self.config
         t0 = time.perf_counter() if t0 is None else t0
         matcher = self.matcher(method or cfg.method)
@@ -264,7 +268,7 @@ class Localizer:
             near = searched.widened_by(REFINE_REACH * resolution[0], REFINE_REACH * resolution[1])
         options = MatchOptions(angle_step_deg=step, closing_kernel=cfg.closing_kernel,
                                region=searched.for_laser(base_T_laser) if searched else None,
-                               max_search_s=cfg.max_search_s)
+                               max_search_s=cfg.max_search_s, incumbent=incumbent, max_nodes=max_nodes)
         if not self._has_obstacles:
             return LocalizationResult(Outcome.NO_MATCH, f'the map {self.map.source} has no obstacles (no occupied '
                                                         f'cell) to match a scan against', matcher.name,
