@@ -19,6 +19,8 @@ from .tables import group, pct, secs
 from .unmapped import LASER
 
 TWINS = ('floor_1', 'floor_2')
+COLUMNS = ('set', "scan's map", 'maps', 'n', 'right', 'confident', 'confident-wrong', 'on a wrong map',
+           'own map alone: confident', 'median [s]', 'p95 [s]', 'time / own map (median)')
 
 
 def maps_rows(maps: dict[str, OccupancyMap], poses_per_map: int, seed: int) -> list[dict]:
@@ -54,8 +56,7 @@ def maps_section(rows: list[dict]) -> list[str]:
              'twice (identical floors: a success there is a guess). "right": the right map and within 0.2 m / 5°; '
              '"confident-wrong": success on the wrong map or pose; "own map alone": the same scan localized in '
              'its map only (what the set adds: ratio of medians, N maps at most N×).', '',
-             '| set | scan\'s map | maps | n | right | confident | confident-wrong | on a wrong map | own map alone: '
-             'confident | median [s] | p95 [s] | time / own map (median) |', '|---' * 12 + '|']
+             '| ' + ' | '.join(COLUMNS) + ' |', '|---' * len(COLUMNS) + '|']
     for (set_name, name), rr in sorted(group(rows, lambda r: (r['set'], r['map'])).items()):
         lines.append(table_line(set_name, name, rr))
     for set_name, rr in sorted(group(rows, lambda r: r['set']).items()):
