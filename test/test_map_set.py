@@ -6,7 +6,7 @@ import pytest
 from conftest import OFFICE_YAML, assert_pose_near, seeded_office_scans
 from global_loc.core.localizer import Localizer
 from global_loc.core.map_io import load_map_yaml, make_map
-from global_loc.core.map_set import MapSet, MapSetError, map_name
+from global_loc.core.map_set import MapSet, MapSetError, map_name, named_paths
 from global_loc.core.outcome import Outcome
 from global_loc.sim.raycast import sample_free_poses, simulate_scan
 
@@ -68,3 +68,14 @@ def test_a_map_set_names_its_errors():
     with pytest.raises(MapSetError, match=r'no map named floor_9 in the set \(maps: office\)'):
         MapSet({'office': office}).searched(['floor_9'])
     assert map_name('/maps/floor_2.yaml') == 'floor_2' and map_name('office') == 'office'
+
+
+def test_map_entries_are_named_by_their_name_or_their_file(tmp_path):
+    """The CLI's --map and the server's maps read one way: NAME=PATH, a plain path (named by
+    its file), an existing file whose name holds '=' (a path), and two of one name refused."""
+    odd = tmp_path / 'a=b.yaml'
+    odd.write_text('')
+    assert named_paths(['floor_2=/m/f.yaml', '/m/office.yaml', str(odd)]) == {
+        'floor_2': '/m/f.yaml', 'office': '/m/office.yaml', 'a=b': str(odd)}
+    with pytest.raises(MapSetError, match='two maps named office'):
+        named_paths(['/m/office.yaml', 'office=/n/other.yaml'])

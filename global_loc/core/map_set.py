@@ -43,6 +43,21 @@ def map_name(yaml_path: str) -> str:
     return base[:-5] if base.endswith('.yaml') else base
 
 
+def named_paths(entries) -> dict[str, str]:
+    """Map YAMLs by name from PATH or NAME=PATH entries (the CLI's --map, the server's `maps`):
+    an entry that is an existing file, or whose part before '=' holds a '/', is a path named
+    by map_name. MapSetError for two maps of one name."""
+    out = {}
+    for entry in map(str, entries):
+        name, sep, path = entry.partition('=')
+        if not sep or os.path.exists(entry) or not name or '/' in name:
+            name, path = map_name(entry), entry
+        if name in out:
+            raise MapSetError(f'two maps named {name}: name them apart (NAME=PATH)')
+        out[name] = path
+    return out
+
+
 class MapSet:
     """Localizers by map name, in the order given; `localize` searches the ones asked (all by
     default) and answers on one of them, or ambiguous between them. `served`: the map the
@@ -59,19 +74,6 @@ class MapSet:
     @property
     def names(self) -> list[str]:
         return list(self.localizers)
-
-    @property
-    def map(self):
-        """The served map."""
-        return self.localizers[self.served].map
-
-    @property
-    def unavailable(self) -> dict[str, str]:
-        return {f'{name}: {method}': reason for name, loc in self.localizers.items()
-                for method, reason in loc.unavailable.items()}
-
-    def prepared(self) -> list[str]:
-        return sorted(set.intersection(*(set(loc.prepared()) for loc in self.localizers.values())))
 
     def reconfigured(self, config) -> 'MapSet':
         """Every map with `config` (Localizer.reconfigured: the matchers shared)."""
@@ -112,13 +114,12 @@ class MapSet:
         """`localize` for points already in the laser frame (7 arguments: as `localize`)."""
         t0 = time.perf_counter()
         names = self.searched(maps)
-        # Every map probed by bnb with a small node budget, then searched in the order of the probes'
-        # best scores: the first in full, every later one only for a place that could rival
-        # the best so far (its score as bnb's incumbent) - on a map the scan does not fit, that
-        # is proved absent in a fraction of a search. The order changes the work, not the answer.
-        probed = {n: self.localizers[n].localize_points(points, TRACKER_METHOD, None, None, base_T_laser,
-                                                        region=region, max_nodes=PROBE_NODES) for n in names}
-        order = sorted(names, key=lambda n: -probed[n].score if math.isfinite(probed[n].score) else math.inf)
+        # With several maps, each is probed by bnb with a small node budget, then searched in the
+        # order of the probes' best scores: the first in full, every later one only for a place
+        # that could rival the best so far (its score as bnb's incumbent) - on a map the scan does
+        # not fit, that is proved absent in a fraction of a search. The order changes the work,
+        # not the answer; one map (the server's usual set) needs no probe.
+        order = names if len(names) == 1 else self.probed_order(points, names, base_T_laser, region)
         results, best = {}, None
 
         def search(k: int, name: str) -> LocalizationResult:
@@ -138,6 +139,12 @@ class MapSet:
                 results[name] = search(k, name)
         return across({n: results[n] for n in names}, {n: self.localizers[n].tracker(method) for n in names},
                       time.perf_counter() - t0)
+
+    def probed_order(self, points, names: list[str], base_T_laser, region) -> list[str]:
+        """The maps by the best score a PROBE_NODES bnb search finds on each, best first."""
+        probed = {n: self.localizers[n].localize_points(points, TRACKER_METHOD, None, None, base_T_laser,
+                                                        region=region, max_nodes=PROBE_NODES) for n in names}
+        return sorted(names, key=lambda n: -probed[n].score if math.isfinite(probed[n].score) else math.inf)
 
 
 def tagged(result: LocalizationResult, name: str) -> LocalizationResult:

@@ -18,7 +18,7 @@ from ..core import limits
 from ..core.limits import check_within
 from ..core.localizer import Localizer, LocalizerConfig
 from ..core.map_io import MapError, load_map_yaml
-from ..core.map_set import MapSet, MapSetError, map_name
+from ..core.map_set import MapSet, named_paths
 from ..core.matchers import BranchAndBoundOptions, MethodError, method_names
 from ..core.matchers.bnb import option_fields
 from ..core.mount import LaserMount
@@ -139,15 +139,7 @@ def named_maps(args) -> dict:
     if args.carmen and not args.map:
         from .follow import carmen_map
         return {os.path.basename(args.carmen): carmen_map(args.carmen)}
-    maps = {}
-    for value in args.map or [default_map_yaml()]:
-        name, sep, path = value.partition('=')
-        if not sep or os.path.exists(value) or not name or '/' in name:
-            name, path = map_name(value), value
-        if name in maps:
-            raise MapSetError(f'two maps named {name}: name them apart with --map NAME=PATH')
-        maps[name] = load_map_yaml(path)
-    return maps
+    return {name: load_map_yaml(path) for name, path in named_paths(args.map or [default_map_yaml()]).items()}
 
 
 def localize_main(args) -> int:

@@ -83,9 +83,8 @@ def print_result(result: LocalizeResult, as_json: bool) -> None:
         print(f'pose:       {format_pose(result.pose)}  (frame {result.frame_id}, map {result.map})')
         print(f'score:      {result.score:.3f}   confidence: {result.confidence:.2f}   '
               f'time: {result.elapsed_s:.2f} s')
-        for i, (p, s) in enumerate(result.hypotheses):
-            on = f'  map {result.hypothesis_maps[i]}' if i < len(result.hypothesis_maps) else ''
-            print(f'  hypothesis {i + 1}: {format_pose(p)}  score {s:.3f}{on}')
+        for i, ((p, s), on) in enumerate(zip(result.hypotheses, result.padded_maps(), strict=False)):
+            print(f'  hypothesis {i + 1}: {format_pose(p)}  score {s:.3f}' + (f'  map {on}' if on else ''))
     print(f'{result.status}: {result.message}')
 
 

@@ -59,14 +59,17 @@ class LocalizeResult:
                               STATUS_NAMES.get(status, str(status)), result.pose.header.frame_id or 'map',
                               result.map, tuple(result.hypothesis_maps))
 
+    def padded_maps(self):
+        """Each hypothesis's map, '' past the end (an older server sends none)."""
+        return itertools.chain(self.hypothesis_maps, itertools.repeat(''))
+
     def as_dict(self) -> dict:
         """The client's JSON object (test_global_loc --json)."""
         return {'outcome': self.outcome.label, 'status': self.status, 'success': self.success,
                 'message': self.message, 'score': self.score if math.isfinite(self.score) else None,
                 'confidence': self.confidence, 'elapsed_s': self.elapsed_s, 'map': self.map,
                 'hypotheses': [{**p.as_dict(), 'score': round(s, 5), **({'map': m} if m else {})}
-                               for (p, s), m in itertools.zip_longest(self.hypotheses, self.hypothesis_maps[
-                                   :len(self.hypotheses)], fillvalue='')],
+                               for (p, s), m in zip(self.hypotheses, self.padded_maps(), strict=False)],
                 'scan_stamp': self.scan_stamp, 'scan_age_s': self.scan_age_s,
                 'pose': None if self.pose is None else self.pose.as_dict(),
                 'covariance': None if self.covariance is None else self.covariance.tolist()}

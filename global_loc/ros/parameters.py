@@ -17,7 +17,7 @@ from rclpy.parameter import Parameter
 
 from ..core import limits
 from ..core.localizer import LocalizerConfig
-from ..core.map_set import map_name
+from ..core.map_set import MapSetError, map_name, named_paths
 from ..core.matchers import TRACKER_METHOD, BranchAndBoundOptions, method_names, resolve_method
 from ..core.matchers.bnb import option_fields, option_range
 from ..core.mount import LaserMount, MountError
@@ -161,16 +161,11 @@ class ServerConfig:
 
 
 def map_files(entries: list) -> dict[str, str]:
-    """`maps` entries (PATH or NAME=PATH) by name; ConfigError for two of one name."""
-    out = {}
-    for entry in entries:
-        name, sep, path = str(entry).partition('=')
-        if not sep or not name or '/' in name:
-            name, path = map_name(entry), str(entry)
-        if name in out:
-            raise ConfigError(f'parameter maps: two maps named {name} (name them apart: NAME=PATH)')
-        out[name] = path
-    return out
+    """`maps` entries (PATH or NAME=PATH, core.map_set.named_paths) by name."""
+    try:
+        return named_paths(entries)
+    except MapSetError as e:
+        raise ConfigError(f'parameter maps: {e}') from None
 
 
 def check_map_set(v: dict) -> None:
