@@ -314,3 +314,23 @@ def test_the_servers_bnb_ranges_are_the_options_own_and_a_tilted_laser_roll_is_r
     for roll in (0.5, math.pi / 2, math.pi - 0.3):
         with pytest.raises(ConfigError, match='laser_roll: the laser is tilted'):
             build_config({**defaults, 'laser_roll': roll})
+
+
+@pytest.mark.ros      # imports the server's parameter table (rclpy)
+def test_a_map_set_the_server_cannot_serve_fails_configure_naming_the_parameter():
+    """Two maps of one name, a map set with use_map_topic, a served_map not in the set: each
+    a ConfigError naming its parameter (configure fails, the node says why; a live
+    served_map set is refused the same way through check_set)."""
+    from global_loc.ros.parameters import BY_NAME, ConfigError, build_config
+    defaults = {name: spec.default for name, spec in BY_NAME.items()}
+    good = build_config({**defaults, 'maps': ['f1=/m/a.yaml', 'f2=/m/a.yaml'], 'served_map': 'f2'})
+    assert good.map_files == {'f1': '/m/a.yaml', 'f2': '/m/a.yaml'} and good.served_map == 'f2'
+    alone = build_config(defaults)
+    assert alone.map_files == {'office': alone.map_yaml} and alone.served_map == 'office'
+    refused = (({'maps': ['/m/office.yaml', 'office=/n/b.yaml']}, 'parameter maps: two maps named office'),
+               ({'maps': ['/m/a.yaml'], 'use_map_topic': True}, 'parameter maps: a map set is read from files'),
+               ({'maps': ['/m/a.yaml'], 'served_map': 'b'}, 'parameter served_map: b is not a map of the set'),
+               ({'served_map': 'b'}, 'parameter served_map: b is not a map of the set'))
+    for values, said in refused:
+        with pytest.raises(ConfigError, match=re.escape(said)):
+            build_config({**defaults, **values})
