@@ -199,6 +199,41 @@ class Localizer:
                 kept.append(dataclasses.replace(c, laser_pose=prior.nearest(base) * base_T_laser))
         return kept
 
+    def search_options(self, matcher, points: ScanPoints, angle_step_deg: Optional[float], base_T_laser: Rigid2D,
+                       prior: Optional[SearchRegion]) -> tuple:
+        """The match's options for this scan: (options, the prior as searched, that widened by a
+        refinement's reach, the note on widening it). A prior tighter than the search's
+        resolution holds no leaf: it is searched wider, and the answer says so."""
+        if not base_T_laser.is_finite():
+            raise MountError(f'the laser mounting on the base must be finite, got {base_T_laser}')
+        cfg = self.config
+        step = check_angle_step(angle_step_deg or cfg.angle_step_deg)
+        searched = near = None
+        widened = ''
+        if prior is not None:
+            resolution = matcher.search_resolution(points, step)
+            searched, widened = prior.widened_to(*resolution)
+            near = searched.widened_by(REFINE_REACH * resolution[0], REFINE_REACH * resolution[1])
+        options = MatchOptions(angle_step_deg=step, closing_kernel=cfg.closing_kernel,
+                               region=searched.for_laser(base_T_laser) if searched else None,
+                               max_search_s=cfg.max_search_s)
+        return options, searched, near, widened
+
+    def probe(self, points: ScanPoints, max_nodes: int, incumbent: float = 0.0, base_T_laser: Optional[Rigid2D] = None,
+              region: Optional[SearchRegion] = None) -> tuple[float, bool]:
+        """bnb's tree search alone, within `max_nodes` expansions and below `incumbent` (see
+        localize_points), with no refinement and no verdict: (its best leaf score, whether it
+        ended within the budget). How well this map can explain the scan, cheaply - a map
+        set's rounds (core.map_set); (0, True) for a map with no obstacles."""
+        if not self._has_obstacles:
+            return 0.0, True
+        tracker = self.matcher(TRACKER_METHOD)
+        prior = region if region is not None and region.bounded else None
+        options = self.search_options(tracker, points, None, base_T_laser or self.config.base_T_laser, prior)[0]
+        stats = tracker.tree_stats(require_shape(points), dataclasses.replace(options, incumbent=incumbent,
+                                                                              max_nodes=max_nodes))
+        return (stats.best_leaf, stats.exact or stats.settled) if stats is not None else (0.0, True)
+
     def localize(self, scan: Scan, method: Optional[str] = None, angle_step_deg: Optional[float] = None,
                  progress: Optional[ProgressFn] = None, base_T_laser: Optional[Rigid2D] = None,
                  region: Optional[SearchRegion] = None) -> LocalizationResult:
@@ -255,20 +290,10 @@ class Localizer:
         t0 = time.perf_counter() if t0 is None else t0
         matcher = self.matcher(method or cfg.method)
         base_T_laser = base_T_laser or cfg.base_T_laser
-        if not base_T_laser.is_finite():
-            raise MountError(f'the laser mounting on the base must be finite, got {base_T_laser}')
-        laser_T_base = base_T_laser.inverse()
         prior = region if region is not None and region.bounded else None    # every answer lies in it
-        step = check_angle_step(angle_step_deg or cfg.angle_step_deg)
-        searched = near = None
-        widened = ''
-        if prior is not None:   # a prior tighter than the search's resolution holds no leaf: search wider, said
-            resolution = matcher.search_resolution(points, step)
-            searched, widened = prior.widened_to(*resolution)
-            near = searched.widened_by(REFINE_REACH * resolution[0], REFINE_REACH * resolution[1])
-        options = MatchOptions(angle_step_deg=step, closing_kernel=cfg.closing_kernel,
-                               region=searched.for_laser(base_T_laser) if searched else None,
-                               max_search_s=cfg.max_search_s, incumbent=incumbent, max_nodes=max_nodes)
+        options, searched, near, widened = self.search_options(matcher, points, angle_step_deg, base_T_laser, prior)
+        laser_T_base = base_T_laser.inverse()
+        options = dataclasses.replace(options, incumbent=incumbent, max_nodes=max_nodes)
         if not self._has_obstacles:
             return LocalizationResult(Outcome.NO_MATCH, f'the map {self.map.source} has no obstacles (no occupied '
                                                         f'cell) to match a scan against', matcher.name,

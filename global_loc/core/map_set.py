@@ -8,11 +8,10 @@ A map's best hypothesis is the best place of that map (bnb's search is exhaustiv
 checked thesis matcher's rival search covers the rest of its map), so comparing the maps'
 best places is enough: the best map's answer stays confident only when every other map's
 best place lies behind it by the lead a confident answer needs at its fit. Proving that no
-place of a map comes that close is far cheaper than finding its best: after the first map,
-each is searched with the best score so far as bnb's incumbent (only the band below it).
-A map whose search stopped early could hide a better place: it is searched again for a
-rival of the final best, and if that stops too a confident answer becomes `search
-incomplete`, saying which map.
+place of a map comes that close is far cheaper than finding its best: short probes of every
+map find the best leaf some map reaches, and each map's search then takes it as bnb's
+incumbent (only the band below it is searched). A map whose search stopped early could
+hide a better place: a confident answer then becomes `search incomplete`, saying which map.
 """
 from __future__ import annotations
 
@@ -23,14 +22,14 @@ import time
 from typing import Optional, Sequence
 
 from .localizer import LocalizationResult, Localizer
-from .matchers import TRACKER_METHOD
+from .matchers import TRACKER_METHOD, resolve_method
 from .matchers.base import ProgressFn
 from .outcome import Outcome
 from .scan import Scan, scan_to_points
 from .search_region import SearchRegion
 from .transform import Rigid2D
 
-PROBE_NODES = 5_000        # a map's probe: enough to find a good place where the scan fits (bnb nodes)
+PROBE_NODES = (300, 2_000)    # the probe rounds' node budgets (bnb expansions) on each map not yet done
 
 
 class MapSetError(ValueError):
@@ -111,40 +110,48 @@ class MapSet:
                         progress: Optional[ProgressFn] = None, base_T_laser: Optional[Rigid2D] = None,
                         region: Optional[SearchRegion] = None,
                         maps: Optional[Sequence[str]] = None) -> LocalizationResult:
-        """`localize` for points already in the laser frame (7 arguments: as `localize`)."""
+        """`localize` for points already in the laser frame (7 arguments: as `localize`).
+        With several maps and bnb, the maps are probed first (raced_leaves), then each is
+        searched in full, the one with the best leaf first, every search seeded with the
+        best leaf found anywhere so far."""
         t0 = time.perf_counter()
         names = self.searched(maps)
-        # With several maps, each is probed by bnb with a small node budget, then searched in the
-        # order of the probes' best scores: the first in full, every later one only for a place
-        # that could rival the best so far (its score as bnb's incumbent) - on a map the scan does
-        # not fit, that is proved absent in a fraction of a search. The order changes the work,
-        # not the answer; one map (the server's usual set) needs no probe.
-        order = names if len(names) == 1 else self.probed_order(points, names, base_T_laser, region)
-        results, best = {}, None
-
-        def search(k: int, name: str) -> LocalizationResult:
+        raced = len(names) > 1 and resolve_method(method or self.localizers[names[0]].config.method) == TRACKER_METHOD
+        leaf = self.raced_leaves(points, names, base_T_laser, region) if raced else {n: 0.0 for n in names}
+        best_leaf = max(leaf.values())
+        results = {}
+        for name in sorted(names, key=lambda n: -leaf[n]):
+            k = names.index(name)
             part = None if progress is None else (
-                lambda fraction, score: progress((k + fraction) / len(names), score))
-            incumbent = best.score if best is not None else 0.0
-            return tagged(self.localizers[name].localize_points(points, method, angle_step_deg, part, base_T_laser,
-                                                                region=region, incumbent=incumbent), name)
-        for k, name in enumerate(order):
-            results[name] = search(k, name)
-            if results[name].pose is not None and math.isfinite(results[name].score) and (
-                    best is None or results[name].score > best.score):
-                best = results[name]
-        # a map whose search stopped before the best was known: searched again for a rival of it
-        for k, name in enumerate(order):
-            if best is not None and name != best.map and results[name].outcome == Outcome.SEARCH_INCOMPLETE:
-                results[name] = search(k, name)
+                lambda fraction, score, k=k: progress((k + fraction) / len(names), score))
+            results[name] = tagged(self.localizers[name].localize_points(
+                points, method, angle_step_deg, part, base_T_laser, region=region, incumbent=best_leaf), name)
+            best_leaf = max(best_leaf, leaf_of(results[name]))
         return across({n: results[n] for n in names}, {n: self.localizers[n].tracker(method) for n in names},
                       time.perf_counter() - t0)
 
-    def probed_order(self, points, names: list[str], base_T_laser, region) -> list[str]:
-        """The maps by the best score a PROBE_NODES bnb search finds on each, best first."""
-        probed = {n: self.localizers[n].localize_points(points, TRACKER_METHOD, None, None, base_T_laser,
-                                                        region=region, max_nodes=PROBE_NODES) for n in names}
-        return sorted(names, key=lambda n: -probed[n].score if math.isfinite(probed[n].score) else math.inf)
+    def raced_leaves(self, points, names: list[str], base_T_laser, region) -> dict[str, float]:
+        """The best leaf bnb's tree search finds on each map, in rounds: every map not yet done
+        searched within a node budget (RACE_NODES, growing RACE_GROWTH-fold each round up to
+        bnb's own max_nodes), the best leaf of any map so far as its incumbent. A map is done
+        when its search ends within the budget. The map the scan fits finds a high leaf in an
+        early round; with it as the incumbent, a map the scan does not fit is proved to hold
+        no place in its band in a fraction of a search. The leaves only order the maps and
+        seed the final searches (a leaf's score is reached by some place): they change the
+        work, not the answer."""
+        leaf, pending = {n: 0.0 for n in names}, list(names)
+        for budget in PROBE_NODES:
+            for name in sorted(pending, key=lambda n: -leaf[n]):
+                leaf[name], done = self.localizers[name].probe(points, budget, max(leaf.values()), base_T_laser, region)
+                if done:
+                    pending.remove(name)
+        return leaf
+
+
+def leaf_of(result: Optional[LocalizationResult]) -> float:
+    """The best leaf score a result's bnb search found (0 without one)."""
+    stats = getattr(result, 'search_stats', None)
+    return float(getattr(stats, 'best_leaf', 0.0))
 
 
 def tagged(result: LocalizationResult, name: str) -> LocalizationResult:

@@ -39,7 +39,7 @@ from .kernels import warm_up as warm_up_search
 from .options import BranchAndBoundOptions
 from .refine import bin_maxima, landscape_covariance, refine
 from .refine import warm_up as warm_up_refine
-from .search import SearchStats, SettledFn, ThreadedSearch, search_threads
+from .search import SearchRun, SearchStats, SettledFn, ThreadedSearch, search_threads
 from .verdict import explained_share, judge, needed_lead, unscored_could_be_confident
 
 
@@ -48,6 +48,15 @@ class SettledJudgment(NamedTuple):
     leaves: int        # how many leaves it judged
     settled: bool      # they judge `poor match`, or `ambiguous` with a full list
     fit: float         # the best field score among their hypotheses
+
+
+class TreeSearch(NamedTuple):
+    """What the branch and bound of one match found, before its peaks are refined."""
+    pts: np.ndarray        # the prepared points searched with
+    d0: float              # the leaf angle step
+    run: SearchRun
+    stats: SearchStats
+    stopped: str           # why the search stopped early ('' when it did not)
 
 
 SETTLED = ('the search ended once no place it had not scored could make the answer confident: the hypotheses are '
@@ -73,6 +82,7 @@ class BranchAndBoundMatcher(Matcher):
         self.distinct_angle = self.options.distinct_angle
         self.stack = PrecomputationGridStack(occupancy_map, self.options)
         self.searcher = ThreadedSearch(slice_expansions)
+        self._last_tops = None     # (scan key, its top nodes and tables): see tree_search
         # Called with each match's distinct peaks (their leaf scores), their refined fits and the
         # ranked candidates: what an experiment on the band or the refinement measures
         # (benchmarks/experiments/), read without changing the search. None: nothing called.
@@ -113,36 +123,72 @@ class BranchAndBoundMatcher(Matcher):
         return raw / (255.0 * len(pts))
 
     def match(self, points: ScanPoints, options: MatchOptions, progress: Optional[ProgressFn] = None) -> Match:
+        tree = self.tree_search(points, options, progress)
+        if tree is None:
+            return Match([])
+        # 3. Peaks, refined, checked for free space, ranked.
+        leaves = tree.run.leaves
+        scores = leaves[:, 3] / (255.0 * len(tree.pts))
+        candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], scores, tree.pts, tree.d0, points)
+        if progress:
+            progress(1.0, candidates[0].score if candidates else 0.0)
+        settled = SETTLED if tree.run.settled else ''
+        return Match(candidates, tree.stats, tree.stopped, settled)
+
+    def tree_stats(self, points: ScanPoints, options: MatchOptions) -> Optional[SearchStats]:
+        """The statistics of a search within `options`' limits, with no refinement and no
+        verdict (its best leaf: how well the map can explain the scan, cheaply; a map set's
+        rounds); None when there is nothing to search."""
+        tree = self.tree_search(points, options, None)
+        return tree.stats if tree is not None else None
+
+    def top_nodes(self, pts: np.ndarray, region: Optional[SearchRegion]) -> tuple:
+        """1. The leaf angle step, and the top-level nodes on blocks that hold a free cell and
+        meet the region: (leaf angles, the search space, their u, v, angle index)."""
+        step = 2 ** (self.options.levels - 1)
+        n_angles = self.leaf_angles(pts)
+        gu, gv, ga = np.meshgrid(np.arange(0, self.map.width, step), np.arange(0, self.map.height, step),
+                                 np.arange(0, n_angles, step), indexing='ij')
+        tu, tv, ta = gu.ravel(), gv.ravel(), ga.ravel()
+        space = self.search_space(n_angles, region)
+        keep = self.stack.free_block(self.options.levels - 1, tu, tv) & region_mask(space, tu, tv, ta,
+                                                                                   self.options.levels - 1)
+        return n_angles, space, tu[keep], tv[keep], ta[keep]
+
+    def tree_search(self, points: ScanPoints, options: MatchOptions,
+                    progress: Optional[ProgressFn]) -> Optional['TreeSearch']:
+        """Steps 1 and 2 of a match: the top-level nodes and the branch and bound; None when
+        the scan has too few points or the search space no free block."""
         opt = self.options
         deadline = time.monotonic() + options.max_search_s
         max_nodes = options.max_nodes or opt.max_nodes
         pts = self.prepare(points.points)
         if len(pts) < 3:
-            return Match([])
-        # 1. The leaf angle step, and the top-level nodes on blocks that hold a free cell.
+            return None
         top = opt.levels - 1
-        step = 2 ** top
-        n_angles = self.leaf_angles(pts)
+        key = (pts.tobytes(), options.region)
+        last = self._last_tops
+        if last is not None and last[0] == key:
+            n_angles, space, tu, tv, ta, tables, bounds = last[1]
+        else:
+            n_angles, space, tu, tv, ta = self.top_nodes(pts, options.region)
+            if len(tu) == 0:
+                return None
+            tables = self.tables(pts, 2 * math.pi / n_angles, n_angles)
+            bounds = node_bounds(self.stack.planes, tables, tu, tv, ta, top)
+            # one scan's top nodes and tables kept: a map set searches each map several times
+            # with one scan (core.map_set), and they take a few ms to build on a large map
+            self._last_tops = (key, (n_angles, space, tu, tv, ta, tables, bounds))
         d0 = 2 * math.pi / n_angles
-        gu, gv, ga = np.meshgrid(np.arange(0, self.map.width, step), np.arange(0, self.map.height, step),
-                                 np.arange(0, n_angles, step), indexing='ij')
-        tu, tv, ta = gu.ravel(), gv.ravel(), ga.ravel()
-        space = self.search_space(n_angles, options.region)
-        keep = self.stack.free_block(top, tu, tv) & region_mask(space, tu, tv, ta, top)
-        tu, tv, ta = tu[keep], tv[keep], ta[keep]
-        if len(tu) == 0:
-            return Match([])
         # 2. Branch and bound down to the band below the best leaf (verdict.searched_keep).
-        tables = self.tables(pts, d0, n_angles)
         search_start = time.perf_counter()
-        bounds = node_bounds(self.stack.planes, tables, tu, tv, ta, top)
         run = self.searcher.run(self.stack.planes, tables, self.stack.free, space,
                                 np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, max_nodes, progress,
                                 deadline, self.settled_check(pts, d0, points),
                                 int(options.incumbent * 255 * len(pts)))
         search_s = time.perf_counter() - search_start
-        leaves, expansions = run.leaves, int(run.per_level.sum())
-        scores = leaves[:, 3] / (255.0 * len(pts))
+        scores = run.leaves[:, 3] / (255.0 * len(pts))
+        expansions = int(run.per_level.sum())
         stopped = '' if run.exact or run.settled else (
             f'stopped after {expansions} node expansions' if expansions >= max_nodes
             else f'stopped at the {options.max_search_s:g} s search limit')
@@ -150,12 +196,7 @@ class BranchAndBoundMatcher(Matcher):
                             expansions=expansions, per_level=tuple(run.per_level.tolist()), top_nodes=len(tu),
                             threads=search_threads(), best_leaf=float(scores.max()) if len(scores) else 0.0,
                             search_s=search_s, settled=run.settled)
-        # 3. Peaks, refined, checked for free space, ranked.
-        candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], scores, pts, d0, points)
-        if progress:
-            progress(1.0, candidates[0].score if candidates else 0.0)
-        settled = SETTLED if run.settled else ''
-        return Match(candidates, stats, stopped, settled)
+        return TreeSearch(pts, d0, run, stats, stopped)
 
     def settled_check(self, pts, d0, points: ScanPoints) -> Optional[SettledFn]:
         """The search's early end (search.ThreadedSearch.run's `settled`), True once:
