@@ -79,3 +79,23 @@ def test_map_entries_are_named_by_their_name_or_their_file(tmp_path):
         'floor_2': '/m/f.yaml', 'office': '/m/office.yaml', 'a=b': str(odd)}
     with pytest.raises(MapSetError, match='two maps named office'):
         named_paths(['/m/office.yaml', 'office=/n/other.yaml'])
+
+
+def test_a_map_set_file_stands_for_the_maps_it_lists(tmp_path):
+    """One YAML listing the maps (PATH, NAME=PATH or NAME: PATH, relative to the file) is
+    the same as listing them one by one; a bad list, or a name twice across files, is refused."""
+    (tmp_path / 'floors').mkdir()
+    listing = tmp_path / 'floors' / 'building.yaml'
+    listing.write_text('maps:\n  - floor_1: f1.yaml\n  - floor_2=/abs/f2.yaml\n  - ../lobby.yaml\n')
+    folder = str(tmp_path / 'floors')
+    assert named_paths([str(listing)]) == {'floor_1': f'{folder}/f1.yaml', 'floor_2': '/abs/f2.yaml',
+                                           'lobby': f'{folder}/../lobby.yaml'}
+    assert named_paths([str(listing), '/m/office.yaml'])['office'] == '/m/office.yaml'
+    with pytest.raises(MapSetError, match='two maps named floor_1'):
+        named_paths([str(listing), 'floor_1=/m/other.yaml'])
+    bad = tmp_path / 'bad.yaml'
+    for text, says in (('maps: []\n', 'non-empty list'), ('maps:\n  - 3\n', 'an entry of `maps`')):
+        bad.write_text(text)
+        with pytest.raises(MapSetError, match=says):
+            named_paths([str(bad)])
+    assert named_paths([OFFICE_YAML]) == {'office': OFFICE_YAML}       # a map YAML is a map

@@ -21,6 +21,8 @@ import os
 import time
 from typing import Optional, Sequence
 
+import yaml
+
 from .localizer import LocalizationResult, Localizer
 from .matchers import TRACKER_METHOD, resolve_method
 from .matchers.base import ProgressFn
@@ -42,19 +44,55 @@ def map_name(yaml_path: str) -> str:
     return base[:-5] if base.endswith('.yaml') else base
 
 
-def named_paths(entries) -> dict[str, str]:
+def named_paths(entries, expand: bool = True) -> dict[str, str]:
     """Map YAMLs by name from PATH or NAME=PATH entries (the CLI's --map, the server's `maps`):
     an entry that is an existing file, or whose part before '=' holds a '/', is a path named
-    by map_name. MapSetError for two maps of one name."""
+    by map_name. A map-set file - a YAML whose `maps` lists such entries (map YAMLs, paths
+    relative to it) - stands for its entries (`expand`). MapSetError for two maps of one name
+    or a bad map-set file."""
     out = {}
     for entry in map(str, entries):
         name, sep, path = entry.partition('=')
         if not sep or os.path.exists(entry) or not name or '/' in name:
             name, path = map_name(entry), entry
-        if name in out:
-            raise MapSetError(f'two maps named {name}: name them apart (NAME=PATH)')
-        out[name] = path
+        listed = map_set_file_entries(path) if expand else None
+        for one, its_path in (named_paths(listed, expand=False) if listed is not None else {name: path}).items():
+            if one in out:
+                raise MapSetError(f'two maps named {one}: name them apart (NAME=PATH)')
+            out[one] = its_path
     return out
+
+
+def map_set_file_entries(path: str) -> Optional[list[str]]:
+    """The entries a map-set file lists (`maps:` PATH or NAME=PATH, or NAME: PATH), paths made
+    relative to the file's folder; None for any other file (a map YAML has no `maps`)."""
+    if not (path.endswith(('.yaml', '.yml')) and os.path.isfile(path)):
+        return None
+    try:
+        with open(path, encoding='utf-8') as f:
+            doc = yaml.safe_load(f)
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return None        # not a map-set file: loading it as a map says what is wrong with it
+    if not isinstance(doc, dict) or 'maps' not in doc:
+        return None
+    listed = doc['maps']
+    if not isinstance(listed, list) or not listed:
+        raise MapSetError(f'map-set file {path}: `maps` must be a non-empty list of PATH, NAME=PATH or NAME: PATH')
+    folder = os.path.dirname(os.path.abspath(path))
+    entries = []
+    for item in listed:
+        if isinstance(item, dict) and len(item) == 1:
+            (name, target), = item.items()
+            item = f'{name}={target}'
+        if not isinstance(item, str) or not item:
+            raise MapSetError(f'map-set file {path}: an entry of `maps` must be PATH, NAME=PATH or NAME: PATH, '
+                              f'got {item!r}')
+        name, sep, target = item.partition('=')
+        if not sep or '/' in name:
+            name, target = '', item
+        target = target if os.path.isabs(target) else os.path.join(folder, target)
+        entries.append(f'{name}={target}' if name else target)
+    return entries
 
 
 class MapSet:
