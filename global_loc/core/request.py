@@ -44,8 +44,9 @@ class Request:
     rotate_in_place: bool = False
     publish: bool = True
     publish_if_ambiguous: bool = False
-    origin: str = 'goal'        # who asked: goal, trigger, reinitialize, relocalization
+    origin: str = 'goal'        # who asked: goal, trigger, reinitialize, relocalization, start-up
     maps: tuple = ()            # the maps to search, by name (a map set); empty: every map
+    from_stored_pose: bool = False   # first try the stored pose (core.stored_pose), then search in full
 
 
 @dataclass(frozen=True)
@@ -67,7 +68,7 @@ def check_bound(name: str, value: float) -> float:
 class Asked:
     """A request as it was asked, before validation: an action goal's fields, or those of
     ~/trigger and the watch's relocalization (0 / '' leave a field to the server's default)."""
-    origin: str = 'goal'        # who asked: goal, trigger, reinitialize, relocalization
+    origin: str = 'goal'        # who asked: goal, trigger, reinitialize, relocalization, start-up
     method: str = ''
     angle_step_deg: float = 0.0
     timeout_s: float = 0.0
@@ -79,6 +80,7 @@ class Asked:
     publish: bool = True
     publish_if_ambiguous: bool = False
     maps: tuple = ()            # by name; empty: every map the server has
+    from_stored_pose: bool = False
 
 
 def make_request(asked: Asked, defaults: RequestDefaults) -> Request:
@@ -95,4 +97,5 @@ def make_request(asked: Asked, defaults: RequestDefaults) -> Request:
         raise RequestError(str(e)) from None
     return Request(name, step, check_bound('scan_timeout_s', asked.timeout_s or defaults.scan_timeout_s), region,
                    check_bound('resolve_by_motion_s', asked.resolve_by_motion_s), bool(asked.rotate_in_place),
-                   bool(asked.publish), bool(asked.publish_if_ambiguous), asked.origin, tuple(asked.maps))
+                   bool(asked.publish), bool(asked.publish_if_ambiguous), asked.origin, tuple(asked.maps),
+                   bool(asked.from_stored_pose))

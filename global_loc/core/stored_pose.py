@@ -24,6 +24,7 @@ import json
 import math
 import os
 import tempfile
+import time
 from dataclasses import dataclass
 from typing import Optional
 
@@ -127,6 +128,7 @@ def confirm_stored_pose(map_set, points: ScanPoints, stored: StoredPose, base_T_
     served now (core.map_set.MapSet); `odometry_now`: the odometry at the scan, if known;
     `age_s`: how long ago the pose was stored; `max_age_s`: older is stale (0: any age).
     (7 arguments: the scan, the stored pose and the three facts the start-up has about now.)"""
+    t0 = time.perf_counter()
     if max_age_s > 0 and age_s > max_age_s:
         return None, f'the stored pose is stale: stored {age_s:.0f} s ago (stored_pose_max_age_s {max_age_s:g})'
     if stored.map not in map_set.localizers:
@@ -151,11 +153,11 @@ def confirm_stored_pose(map_set, points: ScanPoints, stored: StoredPose, base_T_
         if math.isfinite(fit) and fit >= need:
             hyp = Hypothesis(refined, fit, stored.map)
             return LocalizationResult(
-                Outcome.LOCALIZED, f'localized: the stored pose confirmed ({how}; fit {fit:.3f}, stored '
+                Outcome.LOCALIZED, f'the stored pose confirmed ({how}; fit {fit:.3f}, stored '
                                    f'{stored.fit:.3f}, at least {need:.3f} needed; stored {age_s:.0f} s ago on map '
                                    f'{stored.map})',
                 tracker.name, pose=refined, score=fit, confidence=stored.confidence,
                 covariance=np.asarray(stored.covariance, float).reshape(3, 3), hypotheses=[hyp],
-                map=stored.map), ''
+                map=stored.map, time_s=time.perf_counter() - t0), ''
     return None, (f'the scan does not confirm the stored pose {format_pose(stored.pose)} on map {stored.map}: fit '
                   f'{best_fit:.3f} there, at least {need:.3f} needed (stored {stored.fit:.3f})')

@@ -55,6 +55,11 @@ SPECS = [
     Spec('served_map', '', 'in a map set, the map nav2 map_server serves on /map (empty: the first of maps); '
                            '/initialpose is published only for an answer on it (set it when map_server switches)',
          live=True),
+    Spec('stored_pose_file', '', 'start-up from the last pose: a file that keeps the last confident pose published '
+                                 '(with its map and the odometry then), tried first at activation and on '
+                                 '~/localize_from_stored_pose - confirmed by the scan or a full search; empty: off'),
+    Spec('stored_pose_max_age_s', 0.0, 'a stored pose older than this is not tried (0: any age), s', (0.0, 1e9),
+         live=True),
     Spec('scan_topics', ['/scan'], 'sensor_msgs/LaserScan topics merged into one view (the first: the primary '
                                    'laser, which the health watch and resolve-by-motion use)'),
     Spec('scan_topic', '', 'the one-laser alias of scan_topics (set: scan_topics is [scan_topic])'),

@@ -55,6 +55,7 @@ class Collaborators:
     show: Callable                               # (result, scan, base_T_laser, stamp, map) -> RViz topics
     clock_now: Callable[[], float]               # the node's clock (sim time with use_sim_time), s
     logger: object
+    pose_file: Callable[[], object] = lambda: None   # -> the ros.pose_file.PoseFile, or None (off)
 
 
 @dataclass(frozen=True)
@@ -141,9 +142,13 @@ class RequestPath:
             view, messages = make_view(self.c.sensors, newest, start, self.c.mount, self.c.odometry,
                                        self.c.config().view)
             self.log_view(view, messages)
-            result = localizer.localize_points(view.points, request.method, request.angle_step_deg,
-                                               self.progress(asker), base_T_laser=view.base_T_laser,
-                                               region=request.region, maps=request.maps)
+            result, not_confirmed = self.from_stored_pose(request, localizer, view, messages)
+            if result is None:
+                result = localizer.localize_points(view.points, request.method, request.angle_step_deg,
+                                                   self.progress(asker), base_T_laser=view.base_T_laser,
+                                                   region=request.region, maps=request.maps)
+            if not_confirmed:
+                result = dataclasses.replace(result, message=f'{result.message} (searched in full: {not_confirmed})')
         except ScanError as e:      # ViewError, MountError, NoMounting are ScanErrors
             return self.end_early(Outcome.UNUSABLE_SCAN, f'scan unusable: {e}')
         except BudgetError as e:    # the goal asks for more work than a goal may do
@@ -158,6 +163,21 @@ class RequestPath:
         if cancelled():     # asked to end, or its configuration ended, after the search's last step
             raise CanceledError()
         return self.publish(request, result, shown, maps.generation, localizer, start)
+
+    def from_stored_pose(self, request: Request, map_set: MapSet, view, messages: dict) -> tuple:
+        """(the stored pose confirmed by the view, '') when the request asks for it and the file
+        confirms; (None, why not) when it asks and it does not; (None, '') otherwise."""
+        if not request.from_stored_pose:
+            return None, ''
+        pose_file = self.c.pose_file()
+        if pose_file is None:
+            return None, 'no stored_pose_file is set'
+        stamp = max(stamp_seconds(m.header.stamp) for m in messages.values())
+        result, why = pose_file.confirm(map_set, view.points, view.base_T_laser, stamp,
+                                        self.c.config()['stored_pose_max_age_s'])
+        self.c.logger.info('the stored pose is confirmed' if result is not None else
+                           f'the stored pose is not confirmed: {why}; searching in full')
+        return result, why
 
     def resolve_by_motion(self, result, messages: dict, request: Request, localizer, asker: Asker,
                           shown: tuple) -> tuple:
@@ -253,6 +273,8 @@ class RequestPath:
             elif wanted:
                 self.c.publish_pose(out.pose)
                 summary += f'; published on {config["initialpose_topic"]}'
+                if result.success and self.c.pose_file() is not None:
+                    self.c.pose_file().save(result, stamp_seconds(msg.header.stamp), map_set.searched(request.maps))
         self.c.logger.info(summary)
         return out
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import functools
 import threading
-import time
 from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -33,7 +32,6 @@ from visualization_msgs.msg import MarkerArray
 
 from global_loc_interfaces.action import Localize
 
-from ..core.localizer import Localizer
 from ..core.map_io import load_map_yaml
 from ..core.map_set import MapSet
 from ..core.map_slot import MapSlot
@@ -44,9 +42,11 @@ from ..core.pose_history import PoseHistory
 from ..core.request import Asked
 from .convert import map_from_msg, pose_from_msg, stamp_seconds
 from .guards import InFlight, answer_every_change_state, guard, warn_about_peers_once
+from .map_build import build_map_set
 from .motion import MotionContext
 from .node_main import exit_process, run_node
 from .parameters import BY_NAME, ConfigError, apply_live, check_set, declare_parameters, parameter_value, read_config
+from .pose_file import PoseFile
 from .request_path import Asker, Collaborators, RequestPath, asked_by_goal, publish_feedback, trigger_message
 from .rviz import hypotheses_msg, local_map_msg, markers_msg
 from .sensors import SensorInputs, SensorMounts, laser_fit, subscribe
@@ -70,14 +70,11 @@ class GlobalLocServer(LifecycleNode):
         self.scans: NewestMessage[LaserScan] = NewestMessage()       # the primary laser's (watch, resolve-by-motion)
         self.odom_history = PoseHistory()                      # odometry by stamp
         self.errors: dict[str, int] = {}                       # callback name -> exceptions caught
-        self.pubs: dict = {}
-        self.subs: list = []
-        self.own_timers: list = []
-        self.watch = None
-        self.mounts = None
-        self.cmd_vel_pub = None
+        self.pubs, self.subs, self.own_timers = {}, [], []
+        self.watch = self.mounts = self.cmd_vel_pub = None
         self.motion: Optional[MotionContext] = None     # while configured
         self.in_flight = InFlight()
+        self.pose_file: Optional[PoseFile] = None        # stored_pose_file's, while configured
         self.guarded = functools.partial(guard, errors=self.errors, logger=self.get_logger())
         self.path = RequestPath(Collaborators(
             config=lambda: self.config, maps=self.maps, sensors=self.sensors,
@@ -85,19 +82,20 @@ class GlobalLocServer(LifecycleNode):
             odometry=self.odom_history, motion=lambda: self.motion,
             publish_pose=lambda msg: self.pubs['initialpose'].publish(msg), show=self.show,
             publish_map=lambda name: self.pubs['current_map'].publish(String(data=name)),
-            clock_now=lambda: self.get_clock().now().nanoseconds * 1e-9, logger=self.get_logger()))
+            clock_now=lambda: self.get_clock().now().nanoseconds * 1e-9, logger=self.get_logger(),
+            pose_file=lambda: self.pose_file))
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         # The action and the services exist in every state, so a request while inactive gets a reason.
         self.action_server = ActionServer(self, Localize, 'localize', self.execute, callback_group=self.group,
                                           goal_callback=lambda goal: GoalResponse.ACCEPT,
                                           cancel_callback=self.on_cancel)
-        self.create_service(Trigger, '~/trigger', self.guarded(self.on_trigger), callback_group=self.group)
-        self.create_service(Empty, '~/reinitialize_global_localization', self.guarded(self.on_reinitialize),
-                            callback_group=self.group)
+        for kind, name, callback in ((Trigger, '~/trigger', self.on_trigger),
+                                     (Empty, '~/reinitialize_global_localization', self.on_reinitialize),
+                                     (Trigger, '~/localize_from_stored_pose', self.on_stored_pose_trigger)):
+            self.create_service(kind, name, self.guarded(callback), callback_group=self.group)
         self.peer_check = warn_about_peers_once(self, self.guarded, self.group)
-        autostart = self.get_parameter('autostart').value
-        if autostart:
+        if self.get_parameter('autostart').value:
             self.trigger_configure()
             if self.config is not None:
                 self.trigger_activate()
@@ -122,6 +120,8 @@ class GlobalLocServer(LifecycleNode):
         self.mounts.configure(config)
         self.sensors.configure(config.sensors)
         self.create_interfaces(config)
+        self.pose_file = PoseFile(config['stored_pose_file'], self.odom_history, self.get_logger()) \
+            if config['stored_pose_file'] else None
         if config['use_map_topic']:
             self.maps.clear(f'waiting for a map on {config["map_topic"]}')
             self.get_logger().info(f'waiting for the map on {config["map_topic"]}')
@@ -169,6 +169,10 @@ class GlobalLocServer(LifecycleNode):
         self.get_logger().info(f'ready: action "localize", services ~/trigger and ~/reinitialize_global_localization, '
                                f'sensors {", ".join(s.topic for s in c.sensors)}, poses to {c["initialpose_topic"]}, '
                                f'default method {c["method"]}')
+        if self.pose_file is not None:      # start-up from the last pose, off the executor
+            self.get_logger().info(f'starting from the stored pose in {self.pose_file.path} (or a full search)')
+            threading.Thread(target=self.serve_unattended, args=(Asked(origin='start-up', from_stored_pose=True),),
+                             daemon=True, name='start-up').start()
         return super().on_activate(state)
 
     def on_deactivate(self, state) -> TransitionCallbackReturn:
@@ -238,23 +242,8 @@ class GlobalLocServer(LifecycleNode):
 
     # ---- maps, odometry, health -------------------------------------------------------------
     def build_localizer(self, load) -> MapSet:
-        """The maps `load()` gives (by name; the map topic's: one), each with every prepared method
-        (`method`, bnb - the watch's fit - and `methods`) precomputed now, in the map builder: a goal
-        never builds one; one that cannot be built on a map is refused to goals with the reason."""
-        config = self.config
-        loaded = load()
-        maps = loaded if isinstance(loaded, dict) else {'map': loaded}     # the map topic's: one map
-        localizers = {}
-        for name, occupancy_map in maps.items():
-            t0 = time.perf_counter()
-            localizers[name] = Localizer(occupancy_map, config.localizer, prepared=config.prepared)
-            for reason in localizers[name].unavailable.values():
-                self.get_logger().error(f'map {name}: {reason}; goals naming it are refused')
-            ready = ', '.join(localizers[name].prepared())
-            label = occupancy_map.source if len(maps) == 1 else f'{name} ({occupancy_map.source})'
-            self.get_logger().info(f'map {label}: {occupancy_map.width} x {occupancy_map.height} cells at '
-                                   f'{occupancy_map.resolution} m; {ready} ready in {time.perf_counter() - t0:.2f} s')
-        return MapSet(localizers, config.served_map if isinstance(loaded, dict) else 'map')
+        """The maps `load()` gives, prepared (ros/map_build.py): in the map builder, off the executor."""
+        return build_map_set(load, self.config, self.get_logger())
 
     def on_map_change(self, installed, note: str, dropped: bool) -> None:
         if installed.built is None and not dropped:
@@ -289,10 +278,8 @@ class GlobalLocServer(LifecycleNode):
             threading.Thread(target=self.relocalize, daemon=True, name='relocalize').start()
 
     def relocalize(self) -> None:
-        asked = Asked(origin='relocalization', resolve_by_motion_s=self.config['relocalize.resolve_by_motion_s'])
-        with self.in_flight():
-            result = self.path.serve(asked)
-        self.get_logger().info(f'relocalization: {Outcome(result.outcome).label}: {result.message}')
+        result = self.serve_unattended(Asked(origin='relocalization',
+                                             resolve_by_motion_s=self.config['relocalize.resolve_by_motion_s']))
         self.watch.finished(Outcome(result.outcome), published=bool(result.success))
 
     def show(self, result, points, base_T_laser, stamp, occupancy_map) -> None:
@@ -327,17 +314,30 @@ class GlobalLocServer(LifecycleNode):
 
     def on_trigger(self, request, response):
         """std_srvs/Trigger: localize the next scan with the defaults; the outcome in one line."""
+        return self.answer_trigger(Asked(origin='trigger'), response)
+
+    def on_stored_pose_trigger(self, request, response):
+        """std_srvs/Trigger: as ~/trigger, the stored pose tried first (stored_pose_file)."""
+        return self.answer_trigger(Asked(origin='stored pose', from_stored_pose=True), response)
+
+    def answer_trigger(self, asked: Asked, response):
         with self.in_flight():
-            result = self.path.serve(Asked(origin='trigger'))
+            result = self.path.serve(asked)
         response.success = bool(result.success)
         pose = pose_from_msg(result.pose.pose.pose) if len(result.hypotheses.poses) else None
         response.message = trigger_message(result, pose)
         return response
 
+    def serve_unattended(self, asked: Asked) -> Localize.Result:
+        """A request nobody waits on (start-up, relocalization, nav2's reinitialize): its end logged."""
+        with self.in_flight():
+            result = self.path.serve(asked)
+        self.get_logger().info(f'{asked.origin}: {Outcome(result.outcome).label}: {result.message}')
+        return result
+
     def on_reinitialize(self, request, response):
         """std_srvs/Empty (nav2's ReinitializeGlobalLocalization): the same as ~/trigger."""
-        with self.in_flight():
-            self.path.serve(Asked(origin='reinitialize'))
+        self.serve_unattended(Asked(origin='reinitialize'))
         return response
 
 
