@@ -189,13 +189,21 @@ def test_the_sensors_table_is_built_from_rows_per_setup_in_order_with_its_plot(t
 
 @pytest.mark.process
 def test_maps_suite_names_the_map_and_never_answers_identical_floors(tmp_path):
-    rows = [r for r in run_bench(tmp_path, '--suites', 'maps', '--poses', '10', '--jobs', '1')
-            if r['suite'] == 'map_set']
+    every = [r for r in run_bench(tmp_path, '--suites', 'maps', '--poses', '10', '--jobs', '1')
+             if r['suite'] == 'map_set']
+    rows = [r for r in every if r['kind'] == 'map_set']
     assert {r['set'] for r in rows} == {'all', 'twins'} and len({r['map'] for r in rows}) >= 1
     assert not any(r['success'] for r in rows if r['set'] == 'twins')          # identical floors: never a guess
     assert all(r['answer_map'] in ('floor_1', 'floor_2') for r in rows if r['set'] == 'twins' and r['answer_map'])
     assert not any(r['success'] and not r['ok'] for r in rows)
     assert any(r['ok'] and r['success'] for r in rows if r['set'] == 'all')
+    start_up = [r for r in every if r['kind'] == 'start_up']         # a stored pose: never confirmed wrong
+    assert {r['case'] for r in start_up} >= {'kept', 'carried'}
+    assert not any(r['confirmed'] and not r['ok'] for r in start_up)
+    assert all(r['confirmed'] for r in start_up if r['case'] == 'kept')
+    assert not any(r['confirmed'] for r in start_up if r['case'] == 'carried')
+    assert {r['maps'] for r in every if r['kind'] == 'maps_n'} == set(range(1, 1 + rows[0]['maps']))
     report = (tmp_path / 'REPORT.md').read_text()          # the suite's own table leads its report
     assert report.index('## Which map am I on (maps suite)') < report.index('Command:')
+    assert '### Time against the number of maps' in report and '| kept |' in report
     assert '| twins | every map |' in report
