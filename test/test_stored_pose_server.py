@@ -17,8 +17,10 @@ from global_loc.testing.processes import TopicRecorder, isolated_env, reliable, 
 
 pytestmark = pytest.mark.ros
 
-START = Rigid2D(3.0, 4.0, 0.7)          # office places the sim suite localizes confidently
-CARRIED = Rigid2D(20.0, 12.5, 2.5)
+# office places whose scans are confident with a wide margin on every noise draw (a place
+# whose rival is near 5% behind turns ambiguous on some scans, and the test would be a coin toss)
+START = Rigid2D(3.0, 4.0, 0.7)
+CARRIED = Rigid2D(15.0, 3.0, 2.0)
 
 
 def sim_at(env, log, pose: Rigid2D):

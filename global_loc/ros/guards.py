@@ -1,12 +1,13 @@
 """What keeps the server's executor spinning whatever a callback meets: guarded callbacks
 (an exception logged, throttled, and counted on /diagnostics), the count of requests in
 flight (the shutdown waits for them), a lifecycle `~/change_state` that answers every
-request, and the one-off warning about a peer server."""
+request, the one-off warning about a peer server, and the wait for a pose's subscriber."""
 from __future__ import annotations
 
 import contextlib
 import functools
 import threading
+import time
 import traceback
 
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -63,6 +64,19 @@ def warn_about_peers(node) -> None:
     if len(peers) > 1:
         node.get_logger().error(f'{len(peers)} nodes named {node.get_name()} on this ROS domain: each executes '
                                 f'every goal and publishes its poses; run one per domain or rename one')
+
+
+def wait_for_subscriber(publisher, stopping: threading.Event, timeout_s: float = 10.0, grace_s: float = 0.2) -> bool:
+    """Until `publisher` has a subscriber, `timeout_s` passed or `stopping` is set; whether one
+    came. A volatile message published before its subscriber matched is lost - AMCL's
+    /initialpose from a start-up that answers from the first scan (AMCL started by the same
+    launch subscribes within seconds). The grace gives the subscriber's side of the match a
+    moment."""
+    deadline = time.monotonic() + timeout_s
+    while publisher.get_subscription_count() == 0:
+        if stopping.wait(0.05) or time.monotonic() >= deadline:
+            return False
+    return not stopping.wait(grace_s)
 
 
 def answer_every_change_state(node) -> None:

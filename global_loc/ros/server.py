@@ -1,16 +1,13 @@
 """`ros2 run global_loc server`: the global-localization server, a lifecycle node.
 
-States as in nav2: *configure* reads every parameter (an invalid one: configure fails,
-saying which) and loads the map (file or topic); *activate* serves; *deactivate* stops
-accepting work (a running localization ends canceled); *cleanup* drops the map. With
-`autostart` (default) it configures and activates itself; otherwise a lifecycle manager
-drives it (`~/change_state`). Live parameters apply to the next request (ros/parameters.py).
-
-Three ways to ask, one path (ros/request_path.py), one localization at a time: action
-`localize` (feedback, typed outcome, search prior), `~/trigger` (std_srvs/Trigger) and
-`~/reinitialize_global_localization` (std_srvs/Empty, nav2's behaviour-tree node); and
-the health watch's own relocalization (`auto_relocalize`, ros/watch.py); each localizes the
-view of every sensor (ros/sensors.py). docs/ARCHITECTURE.md has the threads, locks and hops."""
+States as in nav2: *configure* reads every parameter (an invalid one fails it, saying which)
+and loads the maps (files or topic); *activate* serves; *deactivate* stops accepting work (a
+running localization ends canceled); *cleanup* drops the maps. With `autostart` (default) it
+configures and activates itself; otherwise a lifecycle manager drives it. Live parameters
+apply to the next request (ros/parameters.py). Every way to ask - action `localize`,
+`~/trigger`, `~/reinitialize_global_localization`, `~/localize_from_stored_pose`, the
+start-up and the health watch (ros/watch.py) - takes one path (ros/request_path.py), one
+localization at a time. docs/ARCHITECTURE.md has the threads, locks and hops."""
 from __future__ import annotations
 
 import functools
@@ -41,7 +38,7 @@ from ..core.outcome import Outcome
 from ..core.pose_history import PoseHistory
 from ..core.request import Asked
 from .convert import map_from_msg, pose_from_msg, stamp_seconds
-from .guards import InFlight, answer_every_change_state, guard, warn_about_peers_once
+from .guards import InFlight, answer_every_change_state, guard, wait_for_subscriber, warn_about_peers_once
 from .map_build import build_map_set
 from .motion import MotionContext
 from .node_main import exit_process, run_node
@@ -171,9 +168,14 @@ class GlobalLocServer(LifecycleNode):
                                f'default method {c["method"]}')
         if self.pose_file is not None:      # start-up from the last pose, off the executor
             self.get_logger().info(f'starting from the stored pose in {self.pose_file.path} (or a full search)')
-            threading.Thread(target=self.serve_unattended, args=(Asked(origin='start-up', from_stored_pose=True),),
-                             daemon=True, name='start-up').start()
+            threading.Thread(target=self.start_up, args=(self.pubs['initialpose'],), daemon=True, name='boot').start()
         return super().on_activate(state)
+
+    def start_up(self, pose_publisher) -> None:
+        """The start-up localization, once the pose topic has a subscriber (a bounded wait)."""
+        if not wait_for_subscriber(pose_publisher, self.path.stopping):
+            self.get_logger().warn(f'start-up: nobody subscribes to {pose_publisher.topic_name}; localizing anyway')
+        self.serve_unattended(Asked(origin='start-up', from_stored_pose=True))
 
     def on_deactivate(self, state) -> TransitionCallbackReturn:
         self.stop_work()
@@ -202,8 +204,7 @@ class GlobalLocServer(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def stop_work(self, timeout: float = 2.0) -> None:
-        """Stop accepting work, end a running localization (canceled), wait for it to end; one
-        still running then ends at its next step, publishing nothing (RequestPath.epoch)."""
+        """Stop accepting work and end what runs (canceled), waiting `timeout` s for it (RequestPath.epoch)."""
         self.wind_down()
         if self.path.busy.acquire(timeout=timeout):
             self.path.busy.release()
@@ -211,9 +212,8 @@ class GlobalLocServer(LifecycleNode):
             self.get_logger().warn(f'a localization still runs {timeout:g} s after the stop: it ends canceled')
 
     def wind_down(self):
-        """run_node's first step on SIGINT/SIGTERM, while the executor still spins: stop
-        accepting work and end what runs (a goal ends canceled, "the server is stopping");
-        returns whether it is all over."""
+        """run_node's first step on SIGINT/SIGTERM, while the executor spins: stop accepting work,
+        end what runs (a goal ends canceled, "the server is stopping"); returns whether it is over."""
         self.path.stop()
         return lambda: self.in_flight.count == 0
 
