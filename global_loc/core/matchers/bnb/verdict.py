@@ -75,9 +75,11 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
 
     Confidence = (margin of the best over the next distinct place, relative to the best,
     over 1 - keep_ratio, the largest margin the search can see) x (how much of the scan
-    the map explains: (field score - 0.3) / 0.3, clipped to [0, 1]). The margin is the
-    smaller of the ranking score's and the field score's: the free-space check may
-    reorder places but never vouches for one alone. `localized` needs confidence >=
+    the map explains: (ranking score - 0.3) / 0.3, clipped to [0, 1] - the field score
+    counts an end point near a wall as explained even when its beam crosses another
+    wall, which the map contradicts, so the best's share is its ranking score's). The
+    margin is the smaller of the ranking score's and the field score's: the free-space
+    check may reorder places but never vouches for one alone. `localized` needs confidence >=
     min_confidence; otherwise `poor match` when the map explains too little of the scan,
     else `ambiguous`.
 
@@ -90,11 +92,12 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
         return Verdict(Outcome.NO_MATCH, 0.0, 'bnb found no pose on free space')
     best, others = candidates[0], candidates[1:]
     fit = [c.explained for c in candidates]
-    explained = explained_share(fit[0])
+    explained = explained_share(best.score)
     need = needed_lead(explained, opt)
     capped = searched_keep(fit[0], opt.keep_ratio, opt.min_confidence, opt.band_allowance) > opt.keep_ratio
-    # No other peak found means none scored above `unseen` x best (in either score).
-    unseen = 1.0 - need if capped else opt.keep_ratio
+    # No other peak found means none scored above `unseen` x best (in either score): the
+    # band searched follows the leaves' field score, so it may be narrower than `need`
+    unseen = 1.0 - needed_lead(explained_share(fit[0]), opt) if capped else opt.keep_ratio
     second = others[0].score if others else unseen * best.score
     rival = max(fit[1:] + [unseen * max(fit)])
     rank_margin = (best.score - second) / best.score if best.score > 0 else 0.0
@@ -108,7 +111,10 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
     if conf >= opt.min_confidence:
         return Verdict(Outcome.LOCALIZED, conf, 'localized')
     if explained < 1.0 and explained < opt.min_confidence:
-        return Verdict(Outcome.POOR_MATCH, conf, f'poor match: the map explains about {100 * fit[0]:.0f}% of the scan')
+        crossing = f' ({100 * best.see_through:.0f}% of its beams would pass through mapped walls)' \
+            if best.see_through else ''
+        return Verdict(Outcome.POOR_MATCH, conf, f'poor match: the map explains about {100 * best.score:.0f}% of the '
+                                                 f'scan{crossing}')
     if fit_margin < 0 and others:
         rival_c = max(others, key=lambda c: c.explained)
         return Verdict(Outcome.AMBIGUOUS, conf,
