@@ -17,10 +17,10 @@ PLANE_SHIFT_FROM = 3                   # planes of level h > this are stored at 
 
 
 class PrecomputationGridStack:
-    """Per map, built once: the likelihood field; per level and widening a uint8 plane
-    whose cell holds the field's maximum over the block starting there and the widening
-    around it (`grid_ids` picks one per point); per level, whether each block holds a
-    free cell. Memory: `nbytes`.
+    """Per map, built once: the likelihood field (uint8: a view of the first plane); per
+    level and widening a uint8 plane whose cell holds the field's maximum over the block
+    starting there and the widening around it (`grid_ids` picks one per point); per
+    level, whether each block holds a free cell. Memory: `nbytes`.
 
     The search is bound by memory latency (a node reads ~200 scattered cells), so the
     planes are kept small: a level-h plane (windows of 2^h cells and more) is stored at
@@ -41,7 +41,7 @@ class PrecomputationGridStack:
             raise ValueError(f'bnb levels must be 1 .. {most}, got {options.levels}')
         # Built in the order that keeps the peak low: the planes, the largest part, last, and
         # every array written where it is kept (36 Mcells: peak 1038 -> 881 MB, see fill_planes).
-        self.field = likelihood_field(occupancy_map, options.sigma_cells)
+        field = likelihood_field(occupancy_map, options.sigma_cells)
         self.occupied = occupancy_map.occupied.view(np.uint8)     # 0 / 1 for the free-space check, no copy
         self.free = free_blocks(occupancy_map.free, options.levels)
         p = (2 ** top) + 2 * int(self.margin(top)) + 2
@@ -62,16 +62,21 @@ class PrecomputationGridStack:
         # level: looser bounds, more nodes; the leaves' level 0 is always whole).
         # (best effort: below shift_from 1 nothing is coarser - the budget may be exceeded)
         for shift_from in range(PLANE_SHIFT_FROM, 0, -1):
-            shift, height, width, sizes = self.plane_layout(self.field.shape, p, shift_from)
+            shift, height, width, sizes = self.plane_layout(field.shape, p, shift_from)
             if sum(sizes) <= options.plane_memory_mb * 1e6:
                 break
         self.shift_from = shift_from
         self.offsets = np.cumsum([0] + sizes[:-1]).astype(np.int64)
         flat = np.empty(sum(sizes), np.uint8)
-        fill_planes(flat, self.field, p, (height, width),
+        fill_planes(flat, field, p, (height, width),
                     [(h, m, int(shift[h]), int(o)) for (h, m), o in zip(self.index, self.offsets, strict=True)])
+        # The refinement reads the field as the leaves' plane stores it, rint(255 x likelihood)
+        # (refine.FIELD_UNIT), through a view without its frame: the float field (4 bytes a
+        # cell, 144 MB on 36 Mcells) is not kept, and a refined pose scores what its leaf did
+        self.field = flat[:height * width].reshape(height, width)[p:p + field.shape[0], p:p + field.shape[1]]
+        del field
         self.planes = Planes(flat, shift, np.array([width >> int(s) for s in shift], np.int64), p, width, height)
-        self.nbytes = self.field.nbytes + self.planes.flat.nbytes + self.free.flags.nbytes + self.occupied.nbytes
+        self.nbytes = self.planes.flat.nbytes + self.free.flags.nbytes + self.occupied.nbytes
 
     def plane_layout(self, shape: tuple[int, int], p: int, shift_from: int):
         """Planes of levels above shift_from stored at 1 / 2^(h - shift_from) resolution, for

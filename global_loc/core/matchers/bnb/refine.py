@@ -14,11 +14,15 @@ from scipy.optimize import minimize
 from ...grid_frame import GridFrame
 from ...pixel_kernels import image_point
 
+# The field's unit: grids.PrecomputationGridStack keeps it as the search's leaves read it,
+# uint8 rint(255 x likelihood)
+FIELD_UNIT = 1.0 / 255.0
+
 
 @njit(cache=True, nogil=True)
 def field_means(field, poses, px, py):
-    """Per pose (u, v, yaw): the mean of the field, bilinearly interpolated (zero outside
-    the map), at the points (px, py, laser frame, in cells)."""
+    """Per pose (u, v, yaw): the mean of the field (uint8, in FIELD_UNIT), bilinearly
+    interpolated (zero outside the map), at the points (px, py, laser frame, in cells)."""
     height, width = field.shape
     out = np.empty(poses.shape[0])
     for k in range(poses.shape[0]):
@@ -34,7 +38,7 @@ def field_means(field, poses, px, py):
                     xx, yy = ix + dx, iy + dy
                     if 0 <= xx < width and 0 <= yy < height:
                         total += field[yy, xx] * (fx if dx else 1.0 - fx) * (fy if dy else 1.0 - fy)
-        out[k] = total / max(len(px), 1)
+        out[k] = total * FIELD_UNIT / max(len(px), 1)
     return out
 
 
@@ -101,4 +105,5 @@ def landscape_covariance(field: np.ndarray, frame: GridFrame, u: float, v: float
 
 
 def warm_up() -> None:
-    field_means(np.zeros((2, 2), np.float32), np.zeros((1, 3)), np.zeros(1), np.zeros(1))
+    # the layout the matcher passes: a strided view of the first plane (see grids)
+    field_means(np.zeros((4, 4), np.uint8)[1:3, 1:3], np.zeros((1, 3)), np.zeros(1), np.zeros(1))
