@@ -7,6 +7,7 @@ import importlib.util
 import os
 import re
 
+import numpy as np
 import pytest
 
 from global_loc.core.map_io import load_map_yaml
@@ -120,3 +121,9 @@ def pytest_make_collect_report(collector):
     if reason:
         report.outcome = 'skipped'
         report.longrepr = (str(collector.path), 0, reason)
+
+
+def brute_force_leaves(matcher, pts, d0, n_angles):
+    """The score of every leaf (free cell x angle), scored like the search's leaves."""
+    rows, cols = np.nonzero(matcher.map.free)
+    return np.concatenate([matcher.bounds(0, cols, rows, np.full(len(cols), a), pts, d0) for a in range(n_angles)])

@@ -258,7 +258,7 @@ class Localizer:
         found = matcher.match(points, options, scaled(progress, 0.0, 0.9) if checking else progress)
         candidates = self.kept(found.candidates, *keep)
         # the matcher decided which hypotheses are distinct; the verdict judges them as they are
-        verdict = matcher.judge(candidates, found.stopped, found.settled)
+        verdict = matcher.judge(candidates, found.stopped, found.settled, found.stats)
         raw = None
         if checking and candidates and not found.stopped:     # a stopped search is never a success anyway
             raw = RawVerdict(verdict.outcome, verdict.confidence, verdict.message,

@@ -75,7 +75,7 @@ def distinct(candidates: list[Candidate], k: int, min_distance: float, min_angle
 class Match:
     """What one `match` call found."""
     candidates: list[Candidate]   # the distinct hypotheses, best first: what the verdict judges
-    stats: Any = None        # the matcher's search statistics (bnb: SearchStats), for diagnostics
+    stats: Any = None        # the matcher's search statistics (bnb: SearchStats; its verdict reads the band)
     stopped: str = ''        # why the search stopped before it was exhaustive ('' when it was)
     settled: str = ''        # why it ended before searching all it would, its answer settled ('' when it did not)
 
@@ -149,21 +149,22 @@ class Matcher(ABC):
         """This matcher's distinct hypotheses among its candidates, best first."""
         return distinct(candidates, self.hypotheses, self.distinct_m, self.distinct_angle)
 
-    def judge(self, candidates: list[Candidate], stopped: str = '', settled: str = '') -> Verdict:
+    def judge(self, candidates: list[Candidate], stopped: str = '', settled: str = '', stats: Any = None) -> Verdict:
         """The verdict on the distinct hypotheses (best first) of a search that stopped
         for `stopped` ('' when it was exhaustive), or ended early because its answer was
         settled (`settled`, Match.settled): the one place a search stopped short is judged
-        - never a success, a better place may lie in what it did not explore."""
+        - never a success, a better place may lie in what it did not explore. `stats`: the
+        search's (Match.stats), for a verdict that depends on what was searched (bnb's band)."""
         if stopped:
             seen = 'best of what was explored, see the hypotheses' if candidates else 'nothing found before it stopped'
             return Verdict(Outcome.SEARCH_INCOMPLETE, 0.0, f'search incomplete: {stopped}; {seen}')
-        verdict = self.judge_exhaustive(candidates)
+        verdict = self.judge_exhaustive(candidates, stats)
         if settled and verdict.success:    # the matcher ends early only on an answer that is not (a guard)
             return Verdict(Outcome.SEARCH_INCOMPLETE, 0.0, f'search incomplete: {settled}, yet the hypotheses are '
                                                             f'judged confident')
         return Verdict(verdict.outcome, verdict.confidence, f'{verdict.message} ({settled})') if settled else verdict
 
-    def judge_exhaustive(self, candidates: list[Candidate]) -> Verdict:
+    def judge_exhaustive(self, candidates: list[Candidate], stats: Any = None) -> Verdict:
         """The verdict on an exhaustive search's distinct hypotheses. The thesis matchers:
         confidence = how far the best stands above the next, relative to it; localized
         when the best score is at least min_score *and* the confidence at least
@@ -212,7 +213,7 @@ class Tracker(Protocol):
     def match(self, points: ScanPoints, options: MatchOptions, progress: Optional[ProgressFn] = None) -> Match:
         ...
 
-    def judge(self, candidates: list[Candidate], stopped: str = '', settled: str = '') -> Verdict:
+    def judge(self, candidates: list[Candidate], stopped: str = '', settled: str = '', stats: Any = None) -> Verdict:
         ...
 
     def distinct(self, candidates: list[Candidate]) -> list[Candidate]:

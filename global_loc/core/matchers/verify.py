@@ -50,7 +50,7 @@ def verify(proposer: str, proposals: list[Candidate], points: ScanPoints, checke
     refined = refined_on_map(checker, proposals, points)
     rivals = checker.match(points, options, progress)
     union = checker.distinct(sorted(refined + rivals.candidates, key=lambda c: -c.score))
-    verdict = checker.judge(union, rivals.stopped, rivals.settled)
+    verdict = checker.judge(union, rivals.stopped, rivals.settled, rivals.stats)
     checked = Match(union, rivals.stats, rivals.stopped, rivals.settled)
     if not verdict.success:
         return checked, Verdict(verdict.outcome, verdict.confidence, f'{verdict.message} (map check of {proposer})')

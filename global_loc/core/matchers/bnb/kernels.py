@@ -7,8 +7,7 @@ use and cached on disk (numba cache=True).
 A node is (u, v, a, h): cells u .. u + 2^h - 1, v .. v + 2^h - 1 of the map, angle
 indices a .. a + 2^h - 1. Its bound is the sum over the scan's points of the point's
 plane (the one widened for its range) at the point's cell, the point rotated by the
-node's middle angle (row row_start[h] + a >> h of the offset tables). Sums are integers
-(planes are uint8).
+node's middle angle (row row_start[h] + a >> h of the offset tables), an integer.
 
 The kernels take a few named tuples (numba compiles attribute reads to plain loads):
 `Planes` (per map: where a plane's cell is in the one flat array), `ScanTables` (per
@@ -225,17 +224,17 @@ def split_heap(keys, nodes, size):
 
 
 @njit(cache=True, nogil=True)
-def search_step(planes, tables, free, space, heap, shared_best, budget, per_level):
+def search_step(planes, tables, free, space, held, heap, shared_best, budget, per_level):
     """Resume the best-first search for at most `budget` expansions.
 
     heap: the pending nodes, (keys, nodes, size) as make_heap returns them. shared_best[0]:
-    the best leaf score any thread's search has found (read before each expansion,
-    raised when this one finds better; a stale read only prunes less). Best first
-    expands no node whose bound is below the best leaf, so it expands the fewest nodes
-    any search with these bounds can. Every node whose bound reaches keep x best is
-    expanded; the search is over when the top of the heap is below that. Leaves (level 0,
-    exact scores) reaching keep_floor(best) when scored are returned; the caller prunes them
-    by the final threshold. Counts expansions per level into per_level.
+    the best leaf score any thread's search has found (read before each expansion, raised
+    when this one finds better; a stale read only prunes less). Every node whose bound
+    reaches keep_floor(best) is expanded, best first; the search is over when the top of
+    the heap is below that. Children and leaves reaching the floor of `held` (`space` with a
+    band as wide or wider) are kept in the heap and returned, so the search can resume with
+    it (search.Resume). The caller prunes the leaves by the final threshold. Counts
+    expansions per level into per_level.
     Returns (expansions, done, leaves (m, 4): u, v, a, score, heap).
     """
     keys, nodes, size = heap
@@ -246,12 +245,14 @@ def search_step(planes, tables, free, space, heap, shared_best, budget, per_leve
     parent_rest = np.zeros(n_points + 1, np.int64)     # parent_rest[i]: sum of parent[i:]
     best = shared_best[0]
     floor = keep_floor(space, best, n_points)
+    hold = keep_floor(held, best, n_points)
     expanded = 0
     done = False
     while expanded < budget:
         if shared_best[0] > best:      # a leaf another thread's search found
             best = shared_best[0]
             floor = keep_floor(space, best, n_points)
+            hold = keep_floor(held, best, n_points)
         if size[0] == 0 or (keys[0] >> 3) < floor:      # the top node's bound (heap_key)
             done = True
             break
@@ -265,14 +266,15 @@ def search_step(planes, tables, free, space, heap, shared_best, budget, per_leve
             cu, cv, ca, searched = child_node(free, space, u, v, a, h, c)
             if not searched:
                 continue
-            cb = child_bound(planes, tables, cu, cv, ca, h - 1, parent, parent_rest, floor)
+            cb = child_bound(planes, tables, cu, cv, ca, h - 1, parent, parent_rest, hold)
             if h == 1:      # a leaf: its exact score
                 if cb > best:
                     best = cb
                     floor = keep_floor(space, best, n_points)
+                    hold = keep_floor(held, best, n_points)
                     if cb > shared_best[0]:
                         shared_best[0] = cb
-                if cb >= floor:
+                if cb >= hold:
                     if n_leaves == leaves.shape[0]:
                         grown = np.empty((2 * n_leaves, 4), np.int64)
                         grown[:n_leaves] = leaves
@@ -282,7 +284,7 @@ def search_step(planes, tables, free, space, heap, shared_best, budget, per_leve
                     leaves[n_leaves, 2] = ca
                     leaves[n_leaves, 3] = cb
                     n_leaves += 1
-            elif cb >= floor:
+            elif cb >= hold:
                 keys, nodes = heap_push(keys, nodes, size, heap_key(cb, h - 1), h - 1, cu, cv, ca)
     return expanded, done, leaves[:n_leaves], (keys, nodes, size)
 
@@ -340,9 +342,9 @@ def warm_up() -> None:
     top = np.zeros((1, 4), np.int64)
     node_bounds(planes, tables, top[:, 0], top[:, 1], top[:, 2], 1)
     space = SearchSpace(2, 2, 2, 0.9, 0.5, 0.03, 0.0, 0.0, -1.0, 0.0, -1.0)
-    search_step(planes, tables, FreeBlocks(np.ones(32, np.uint8), zeros, widths), space,
-                make_heap(top, 1), np.zeros(1, np.int64), 10, np.zeros(2, np.int64))
+    free = FreeBlocks(np.ones(32, np.uint8), zeros, widths)
+    search_step(planes, tables, free, space, space, make_heap(top, 1), np.zeros(1, np.int64), 10, np.zeros(2, np.int64))
     region_mask(space, top[:, 0], top[:, 1], top[:, 2], 1)
-    dive(planes, tables, FreeBlocks(np.ones(32, np.uint8), zeros, widths), space, 0, 0, 0, 1)
+    dive(planes, tables, free, space, 0, 0, 0, 1)
     split_heap(*make_heap(top, 1))
     offset_tables(np.zeros(1), np.zeros(1), np.zeros(1))

@@ -19,6 +19,7 @@ must stand on a free cell of the map.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from typing import Callable, NamedTuple, Optional
@@ -39,8 +40,8 @@ from .kernels import warm_up as warm_up_search
 from .options import BranchAndBoundOptions
 from .refine import bin_maxima, landscape_covariance, refine
 from .refine import warm_up as warm_up_refine
-from .search import SearchRun, SearchStats, SettledFn, ThreadedSearch, search_threads
-from .verdict import explained_share, judge, needed_lead, unscored_could_be_confident
+from .search import Resume, SearchRun, SearchStats, SettledFn, ThreadedSearch, search_threads
+from .verdict import REFINED_GAIN, explained_share, judge, keep_floor, needed_lead, unscored_could_be_confident
 
 
 class SettledJudgment(NamedTuple):
@@ -89,9 +90,12 @@ class BranchAndBoundMatcher(Matcher):
         self.on_peaks: Optional[Callable[[list[float], list[float], list[Candidate]], None]] = None
         warm_up()
 
-    def judge_exhaustive(self, candidates):
-        """See verdict.judge."""
-        return judge(candidates, self.options)
+    def judge_exhaustive(self, candidates, stats=None):
+        """See verdict.judge; judged for the band the search covered (SearchStats.band_allowance)."""
+        opt = self.options
+        if stats is not None and stats.band_allowance != opt.band_allowance:
+            opt = dataclasses.replace(opt, band_allowance=stats.band_allowance)
+        return judge(candidates, opt)
 
     def prepare(self, points: np.ndarray) -> np.ndarray:
         """One point per cell (voxel filter), at most max_points of them, evenly chosen."""
@@ -185,7 +189,7 @@ class BranchAndBoundMatcher(Matcher):
         run = self.searcher.run(self.stack.planes, tables, self.stack.free, space,
                                 np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, max_nodes, progress,
                                 deadline, self.settled_check(pts, d0, points),
-                                int(options.incumbent * 255 * len(pts)))
+                                int(options.incumbent * 255 * len(pts)), self.resume_rule(space, pts, d0, points))
         search_s = time.perf_counter() - search_start
         scores = run.leaves[:, 3] / (255.0 * len(pts))
         expansions = int(run.per_level.sum())
@@ -195,8 +199,32 @@ class BranchAndBoundMatcher(Matcher):
         stats = SearchStats(exact=run.exact, angles=n_angles, points=len(pts), leaves=len(scores),
                             expansions=expansions, per_level=tuple(run.per_level.tolist()), top_nodes=len(tu),
                             threads=search_threads(), best_leaf=float(scores.max()) if len(scores) else 0.0,
-                            search_s=search_s, settled=run.settled)
+                            search_s=search_s, settled=run.settled,
+                            band_allowance=1.0 if run.resumed else opt.band_allowance)
         return TreeSearch(pts, d0, run, stats, stopped)
+
+    def resume_rule(self, space: SearchSpace, pts, d0, points: ScanPoints) -> Optional[Resume]:
+        """With a narrow band (band_allowance < 1): the search resumes with the whole
+        keep_ratio band unless the narrow band's answer is `localized` and no place below
+        it could come within the lead: such a place's leaf scores below the band's floor,
+        its refined fit at most REFINED_GAIN above that. A resumed search ends exactly as
+        one with the whole band from the start (the test_bnb_resume suite)."""
+        if self.options.band_allowance >= 1.0:
+            return None
+        norm = 255.0 * len(pts)
+
+        def needed(leaves: np.ndarray) -> bool:
+            if len(leaves) == 0:
+                return True
+            candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, 3] / norm, pts, d0,
+                                           points)
+            if not candidates or not judge(candidates, self.options).success:
+                return True
+            best = candidates[0]
+            unseen = keep_floor(space, int(leaves[:, 3].max()), len(pts)) / norm + REFINED_GAIN
+            lead = needed_lead(explained_share(best.score), self.options)
+            return min(best.score, best.explained) * (1.0 - lead) < unseen
+        return Resume(space._replace(band_allowance=1.0), needed)
 
     def settled_check(self, pts, d0, points: ScanPoints) -> Optional[SettledFn]:
         """The search's early end (search.ThreadedSearch.run's `settled`), True once:

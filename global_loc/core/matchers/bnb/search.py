@@ -27,7 +27,7 @@ from .verdict import keep_floor
 
 @dataclass(frozen=True)
 class SearchStats:
-    """What one search did (diagnostics: the verdict reads Match.stopped)."""
+    """What one search did (diagnostics; the verdict reads the band it searched)."""
     exact: bool            # False when max_nodes, the time limit or the settled end stopped it
     angles: int            # leaf headings over 360 deg
     points: int            # scan points searched with
@@ -40,10 +40,19 @@ class SearchStats:
     search_s: float = 0.0  # seconds in the search proper (the tree), not in preparing the scan's
                            # tables or refining, checking and ranking the peaks
     settled: bool = False  # it ended early: its answer could not become confident (matcher.settled_check)
+    band_allowance: float = 1.0   # the band it searched (the option's, or 1 once resumed with the whole band)
 
 
 # settled(leaves kept so far, highest pending bound (raw)) -> whether the search may end there
 SettledFn = Callable[[np.ndarray, int], bool]
+
+
+class Resume(NamedTuple):
+    """A lower floor the search can resume with once its own band is searched: the nodes
+    and leaves above `space`'s floor are held meanwhile, so the resumed search expands
+    exactly what a search with `space` from the start would."""
+    space: SearchSpace                       # the same space, a wider band
+    needed: Callable[[np.ndarray], bool]     # the narrow band's leaves -> whether to resume
 
 
 class SearchRun(NamedTuple):
@@ -52,6 +61,7 @@ class SearchRun(NamedTuple):
     per_level: np.ndarray    # expansions per level
     exact: bool              # the whole band was searched
     settled: bool            # `settled` ended it: the band not all searched, the answer not to become confident
+    resumed: bool = False    # it went on with Resume's band: the leaves are that band's
 
 
 def search_threads() -> int:
@@ -80,37 +90,41 @@ class ThreadedSearch:
 
     def run(self, planes: Planes, tables: ScanTables, free: FreeBlocks, space: SearchSpace, top_nodes: np.ndarray,
             top_level: int, max_nodes: int, progress: Optional[ProgressFn],
-            deadline: float = math.inf, settled: Optional[SettledFn] = None, incumbent: int = 0) -> SearchRun:
+            deadline: float = math.inf, settled: Optional[SettledFn] = None, incumbent: int = 0,
+            resume: Optional[Resume] = None) -> SearchRun:
         """Expand every node whose bound reaches the best leaf's band (keep_floor), from the top
-        nodes (rows u, v, a, bound). (11 arguments: the compiled kernels' inputs, which take
-        arrays and named tuples, not objects, and the match's limits.) Returns the leaves scoring that high (rows u, v,
-        angle index, raw score) in pose order, the expansions per level, whether the
-        search was exhaustive (False when max_nodes or the deadline (time.monotonic())
-        stopped it) and whether `settled` ended it. It holds a leaf from the start (a
-        greedy dive from each thread's best top node), so a search stopped at once still
-        returns its best leaf found.
+        nodes (rows u, v, a, bound). (12 arguments: the compiled kernels' inputs, which take
+        arrays and named tuples, not objects, and the match's limits.) Returns the leaves
+        scoring that high (rows u, v, angle index, raw score) in pose order, the expansions
+        per level, whether the search was exhaustive (not stopped by max_nodes or the
+        deadline, time.monotonic()), whether `settled` ended it and whether it resumed. It
+        holds a leaf from the start (a greedy dive from each thread's best top node), so a
+        search stopped at once still returns its best leaf found.
 
         settled(leaves, top): called between slices with the leaves kept so far and the
-        highest bound still pending (raw; every leaf not scored yet scores at most that);
-        True ends the search there - for an answer the rest cannot change.
-
-        incumbent: a raw score some place is known to reach (MatchOptions.incumbent); the
-        search prunes below its band from the start, as if it had found that leaf."""
+        highest bound still pending (raw; no leaf not scored yet scores more); True ends the
+        search there - for an answer the rest cannot change. incumbent: a raw score some
+        place is known to reach (MatchOptions.incumbent), pruned by from the start. resume:
+        once `space`'s band is searched, resume.needed(its leaves) says whether to go on with
+        resume.space's (lower) floor."""
         threads = search_threads()
-        order = np.argsort(-top_nodes[:, 3], kind='stable')     # deal the best nodes evenly
-        heaps = [make_heap(top_nodes[order[k::threads]], top_level) for k in range(threads)]
+        heaps, found = start(planes, tables, free, space, top_nodes, top_level, threads)
         shared_best = np.zeros(PAD, np.int64)
-        per_level = [np.zeros(max(top_level + 1, PAD), np.int64) for _ in heaps]   # PAD: see kernels
-        # the incumbent: only a real leaf's score prunes, so the result is the same with it
-        found = [np.stack([dive(planes, tables, free, space, *top_nodes[i, :3], top_level) for i in order[:threads]])]
-        found[0] = found[0][found[0][:, 3] >= 0]
         shared_best[0] = max(found[0][:, 3].max(initial=0), incumbent)
+        per_level = [np.zeros(max(top_level + 1, PAD), np.int64) for _ in heaps]   # PAD: see kernels
         expanded, done = 0, [False] * threads
+        held = resume.space if resume is not None else space
+        band = [space]      # the band being expanded: `space`'s, then held's once resumed
+        n_points = tables.du.shape[1]
 
         def run(k, budget):
-            n, done[k], leaves, heaps[k] = search_step(planes, tables, free, space, heaps[k], shared_best, budget,
-                                                       per_level[k])
+            n, done[k], leaves, heaps[k] = search_step(planes, tables, free, band[0], held, heaps[k], shared_best,
+                                                       budget, per_level[k])
             return n, leaves
+
+        def result(exact: bool, ended: bool = False) -> SearchRun:
+            return SearchRun(kept_leaves(found, band[0], shared_best[0], n_points),
+                             np.sum(per_level, axis=0)[:top_level + 1], exact, ended, band[0] is not space)
 
         while time.monotonic() <= deadline:
             budget = max(1, min(self.slice_expansions, max_nodes - expanded) // threads)
@@ -120,24 +134,41 @@ class ThreadedSearch:
                 results = list(self._executor(threads).map(run, range(threads), [budget] * threads))
             expanded += sum(n for n, _ in results)
             found.extend(leaves for _, leaves in results)
-            if all(done) or expanded >= max_nodes:     # (the deadline: the loop's condition)
+            if all(done) and band[0] is not held and resume.needed(kept_leaves(found, space, shared_best[0],
+                                                                                 n_points)):
+                band[0], done = held, [False] * threads
+            elif all(done) or expanded >= max_nodes:     # (the deadline: the loop's condition)
                 break
             if settled is not None:
                 top = max((int(h[0][0]) >> 3 for h in heaps if h[2][0] > 0), default=-1)   # (heap_key)
-                kept = kept_leaves(found, space, shared_best[0], tables.du.shape[1])
-                if settled(kept, top):
-                    return SearchRun(kept, np.sum(per_level, axis=0)[:top_level + 1], False, True)
-                found = [kept]         # what is kept now is all a later slice needs (the floor only rises)
-            for k in range(threads):      # an idle thread takes half of the fullest heap
-                if done[k]:
-                    j = max(range(threads), key=lambda i: heaps[i][2][0])
-                    if heaps[j][2][0] > 1:
-                        heaps[k], heaps[j] = split_heap(*heaps[j])
-                        done[k] = done[j] = False
+                if settled(kept_leaves(found, band[0], shared_best[0], n_points), top):
+                    return result(False, True)
+                found = [kept_leaves(found, held, shared_best[0], n_points)]   # all a later slice needs (floors rise)
+            share_work(heaps, done)
             if progress:   # the server's progress callback raises CanceledError on a cancel request
-                progress(min(0.95, expanded / max_nodes), shared_best[0] / (255.0 * tables.du.shape[1]))
-        return SearchRun(kept_leaves(found, space, shared_best[0], tables.du.shape[1]),
-                         np.sum(per_level, axis=0)[:top_level + 1], all(done), False)
+                progress(min(0.95, expanded / max_nodes), shared_best[0] / (255.0 * n_points))
+        return result(all(done))
+
+
+def start(planes: Planes, tables: ScanTables, free: FreeBlocks, space: SearchSpace, top_nodes: np.ndarray,
+          top_level: int, threads: int) -> tuple[list, list[np.ndarray]]:
+    """One heap per thread, the best top nodes dealt evenly, and the leaves of a greedy dive
+    from each thread's best (the first incumbent: a real leaf, so the result is the same).
+    (7 arguments: the compiled kernels' inputs and the thread count.)"""
+    order = np.argsort(-top_nodes[:, 3], kind='stable')
+    heaps = [make_heap(top_nodes[order[k::threads]], top_level) for k in range(threads)]
+    dived = np.stack([dive(planes, tables, free, space, *top_nodes[i, :3], top_level) for i in order[:threads]])
+    return heaps, [dived[dived[:, 3] >= 0]]
+
+
+def share_work(heaps: list, done: list[bool]) -> None:
+    """An idle thread (done) takes half of the fullest heap."""
+    for k in range(len(heaps)):
+        if done[k]:
+            j = max(range(len(heaps)), key=lambda i: heaps[i][2][0])
+            if heaps[j][2][0] > 1:
+                heaps[k], heaps[j] = split_heap(*heaps[j])
+                done[k] = done[j] = False
 
 
 def kept_leaves(found: list[np.ndarray], space: SearchSpace, best: int, n_points: int) -> np.ndarray:

@@ -52,6 +52,11 @@ def needed_lead(explained: float, options: BranchAndBoundOptions) -> float:
     return options.min_confidence * (1.0 - options.keep_ratio) / explained if explained > 0 else math.inf
 
 
+# The most a peak's refined fit was seen above its leaf's score (+0.045, on a low-fit
+# changed-world peak; docs/decisions/0009): what a narrow band's resume rule allows a place
+# it did not score (matcher.resume_rule)
+REFINED_GAIN = 0.05
+
 # judge's tolerance on the lead: a place with no rival seen leads by exactly the lead needed
 LEAD_TOLERANCE = 1e-9
 
