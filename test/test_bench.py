@@ -207,3 +207,21 @@ def test_maps_suite_names_the_map_and_never_answers_identical_floors(tmp_path):
     assert report.index('## Which map am I on (maps suite)') < report.index('Command:')
     assert '### Time against the number of maps' in report and '| kept |' in report
     assert '| twins | every map |' in report
+
+
+def test_the_tail_section_says_which_targets_are_met_from_its_rows():
+    from global_loc.bench.tail import tail_section
+
+    def row(kind, time_s, outcome='localized', ok=True, success=True, score=0.8, **extra):
+        return {'suite': 'tail', 'kind': kind, 'time_s': time_s, 'outcome': outcome, 'ok': ok, 'success': success,
+                'score': score, 'map': 'office', 'log': 'intel', 'expansions': 1000, **extra}
+    changed = [row('changed', 0.1)] * 17 + [row('changed', 3.0, 'search_incomplete', True, False, 0.5)] * 3
+    logs = [row('carmen', 0.05)] * 20
+    big = [row('big', 0.4, cells=36_000_000, peak_mb=900)] * 3
+    text = '\n'.join(tail_section(changed + logs + big))
+    lines = {line.split(' | ')[0]: line for line in text.splitlines() if line.startswith('| ')}
+    assert '**not met**' in lines['| changed world, level 3: p95 ≤ 1 s']           # 3 s in its tail
+    assert '3 of 3 stops' in next(v for k, v in lines.items() if 'node-budget stop' in k)   # score 0.5: explained
+    assert lines['| changed world: 0 confident-wrong'].endswith('| 0 | met | |')
+    assert '| met |' in next(v for k, v in lines.items() if k.startswith('| real logs'))
+    assert '**not met**' in next(v for k, v in lines.items() if 'peak memory' in k)     # 900 MB > 800

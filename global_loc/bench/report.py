@@ -20,6 +20,7 @@ from .sections import faults_section, prior_section, scaling_section, soak_secti
 from .sensors import sensors_section  # noqa: E402
 from .summary import meaning, summary_section, thesis_section  # noqa: E402
 from .tables import BASELINE, group, pct, save_figure, secs, stats  # noqa: E402
+from .tail import tail_section  # noqa: E402
 from .unmapped import unmapped_section  # noqa: E402
 
 BENCHMARKS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
@@ -154,8 +155,9 @@ def write_report(rows, meta, out, maps, trials) -> None:
         sections.append(unmapped_section(by_suite['unmapped']))
     if 'sensors' in by_suite:
         sections.append(sensors_section(by_suite['sensors'], out, plots))
-    for suite, section in (('map_set', maps_section), ('relocalization', relocalization_section),
-                           ('follow', follow_section), ('soak', soak_section), ('faults', faults_section)):
+    for suite, section in (('map_set', maps_section), ('tail', tail_section),
+                           ('relocalization', relocalization_section), ('follow', follow_section),
+                           ('soak', soak_section), ('faults', faults_section)):
         if meta.get(suite):
             sections.append(section(meta[suite]))
     if meta.get('scaling'):

@@ -22,7 +22,7 @@ SUITE_TRIALS = {
 OTHER_REPORTS = {'map_set': 'which map am I on: a map set, identical floors (suite maps)',
                  'relocalization': 'keeping a robot localized', 'follow': 'settling by motion on real logs',
                  'soak': 'real server processes under faults', 'one_job': 'one localization at a time, every core',
-                 'big_map': 'the 6000² tiled building',
+                 'big_map': 'the 6000² tiled building', 'tail': "the search's slow end against its targets",
                  'faults': 'runtime changes against the real server: wrong poses published, hangs, recovery'}
 
 

@@ -34,10 +34,11 @@ class BranchAndBoundOptions:
                                      'pose scoring that high is found (the hypotheses, the margin); the widest '
                                      'band, which band_allowance may narrow', (0.01, 0.999))
     band_allowance: float = _option(1.0, 'the search looks within the lead a confident answer needs (5% at a '
-                                          'full fit) plus this, at most keep_ratio\'s band (verdict.searched_keep): '
-                                          '1 (the default) is always the whole keep_ratio band; at the other '
-                                          'defaults 0.03 is 13-20% faster but can change answers - one confident '
-                                          'wrong answer more on 150 real scans (docs/decisions/0010)', (0.0, 1.0))
+                                          'full fit) plus this, at most keep_ratio\'s band (verdict.searched_keep), '
+                                          'then resumes with the whole band unless no place below could change a '
+                                          'confident answer (matcher.resume_rule): the same answers as 1 (the '
+                                          'default, always the whole band), no faster (docs/decisions/0016)',
+                                    (0.0, 1.0))
     settle_slack: float = _option(1.0, "end the search early (never with a success) once no place it has not "
                                        "scored could make the answer confident, allowing this much for a pose's "
                                        'refined score above its search score (0.05: the most seen was +0.045); 1 '
