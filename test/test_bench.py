@@ -215,7 +215,9 @@ def test_the_tail_section_says_which_targets_are_met_from_its_rows():
     def row(kind, time_s, outcome='localized', ok=True, success=True, score=0.8, **extra):
         return {'suite': 'tail', 'kind': kind, 'time_s': time_s, 'outcome': outcome, 'ok': ok, 'success': success,
                 'score': score, 'map': 'office', 'log': 'intel', 'expansions': 1000, **extra}
-    changed = [row('changed', 0.1)] * 17 + [row('changed', 3.0, 'search_incomplete', True, False, 0.5)] * 3
+    changed = [row('changed', 0.1)] * 16 + [row('changed', 3.0, 'search_incomplete', True, False, 0.5,
+                                                 expansions=400000)] * 3
+    changed.append(row('changed', 5.0, 'search_incomplete', True, False, 0.6, expansions=90000))   # the time limit
     logs = [row('carmen', 0.05)] * 20
     big = [row('big', 0.4, cells=36_000_000, peak_mb=900)] * 3
     text = '\n'.join(tail_section(changed + logs + big))

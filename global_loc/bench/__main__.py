@@ -166,6 +166,13 @@ def localize_all(trials, methods, maps, jobs: int, threads: int) -> list[dict]:
     return rows
 
 
+def tiled_building(maps: dict, shared: str):
+    """The building the scaling and tail suites tile: building_31 (loaded when the run's map
+    set - --quick's - has none), else the office."""
+    building_yaml = shared_maps(shared).get('building_31')
+    return maps.get('building_31') or (load_map_yaml(building_yaml) if building_yaml else maps['office'])
+
+
 def run_other_suites(run: Run, notes: dict) -> None:
     """The suites that are not one localization per trial; their rows go into `notes`."""
     args, suites, methods, maps, poses, threads = run.args, run.suites, run.methods, run.maps, run.poses, run.threads
@@ -177,9 +184,7 @@ def run_other_suites(run: Run, notes: dict) -> None:
     if 'scaling' in suites:
         print('scaling suite (tiled maps, precomputation in fresh processes) ...', file=sys.stderr)
         cv2.setNumThreads(threads)
-        # the building the suite tiles (--quick's map set has no building_31: load it, else the office)
-        building_yaml = shared_maps(args.shared).get('building_31')
-        building = maps.get('building_31') or (load_map_yaml(building_yaml) if building_yaml else maps['office'])
+        building = tiled_building(maps, args.shared)
         real = {n: m for n, m in maps.items() if '/' not in n or n.endswith('/fold0')}
         notes['scaling'] = scaling_rows(building, real, 3 if args.quick else max(5, poses // 4), args.seed,
                                         [m for m in methods if m in ('bnb', BASELINE)],
@@ -191,10 +196,8 @@ def run_other_suites(run: Run, notes: dict) -> None:
         notes['map_set'] = maps_rows(maps, max(2, poses // 5) if args.quick else max(4, poses // 2), args.seed)
     if 'tail' in suites:
         print('tail suite (one localization at a time: changed world, logs, tiled building) ...', file=sys.stderr)
-        building_yaml = shared_maps(args.shared).get('building_31')
-        building = maps.get('building_31') or (load_map_yaml(building_yaml) if building_yaml else maps['office'])
-        notes['tail'] = tail_rows(maps, args.shared, building, max(4, poses // 2), args.scans_per_log or
-                                  (12 if args.quick else 50), args.seed, os.cpu_count() or 1)
+        notes['tail'] = tail_rows(maps, args.shared, tiled_building(maps, args.shared), max(4, poses // 2),
+                                  args.scans_per_log or (12 if args.quick else 50), args.seed, os.cpu_count() or 1)
     if 'follow' in suites:
         print('follow suite (resolution by motion on the CARMEN logs) ...', file=sys.stderr)
         notes['follow'] = follow_rows(args.shared, args.scans_per_log or (12 if args.quick else 100), args.seed)

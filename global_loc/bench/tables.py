@@ -29,8 +29,14 @@ def read_rows(folder: str) -> list[dict]:
         return [json.loads(line) for line in f if line.strip()]
 
 
-def stats(rows: list[dict]) -> dict:
+def time_quantiles(rows: list[dict]) -> tuple[float, float]:
+    """The rows' median and p95 time (NaN for none); rows without a finite time are left out."""
     times = np.array([r['time_s'] for r in rows if math.isfinite(r.get('time_s', float('nan')))])
+    return (float(np.median(times)), float(np.percentile(times, 95))) if len(times) else (math.nan, math.nan)
+
+
+def stats(rows: list[dict]) -> dict:
+    median, p95 = time_quantiles(rows)
     n = len(rows)
     return {'n': n,
             'ok': sum(r['ok'] for r in rows) / n if n else float('nan'),
@@ -38,8 +44,7 @@ def stats(rows: list[dict]) -> dict:
             'top4': sum(r.get('top4_ok', False) for r in rows) / n if n else float('nan'),
             'marked_wrong': sum(r['success'] and not r['ok'] for r in rows) / n if n else float('nan'),
             'marked': sum(r['success'] for r in rows) / n if n else float('nan'),
-            'median': float(np.median(times)) if len(times) else float('nan'),
-            'p95': float(np.percentile(times, 95)) if len(times) else float('nan')}
+            'median': median, 'p95': p95}
 
 
 def group(rows, key):

@@ -218,7 +218,7 @@ class BranchAndBoundMatcher(Matcher):
                 return True
             candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, 3] / norm, pts, d0,
                                            points)
-            if not candidates or not judge(candidates, self.options).success:
+            if not judge(candidates, self.options).success:
                 return True
             best = candidates[0]
             unseen = keep_floor(space, int(leaves[:, 3].max()), len(pts)) / norm + REFINED_GAIN
