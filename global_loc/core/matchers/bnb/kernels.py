@@ -9,9 +9,9 @@ indices a .. a + 2^h - 1. Its bound is the sum over the scan's points of the poi
 plane (the one widened for its range) at the point's cell, the point rotated by the
 node's middle angle (row row_start[h] + a >> h of the offset tables), an integer.
 
-The kernels take a few named tuples (numba compiles attribute reads to plain loads):
-`Planes` (per map: where a plane's cell is in the one flat array), `ScanTables` (per
-scan: each point's offsets and planes), `FreeBlocks` (per map) and `SearchSpace`.
+The kernels take named tuples (numba compiles attribute reads to plain loads): `Planes`
+(per map: where a plane's cell is in the one flat array), `ScanTables` (per scan: each
+point's offsets and planes), `FreeBlocks` (per map) and `SearchSpace`.
 """
 from __future__ import annotations
 
@@ -33,9 +33,9 @@ Planes = namedtuple('Planes', 'flat shift plane_width pad width height')
 ScanTables = namedtuple('ScanTables', 'base du dv row_start')
 # flags[offsets[h] + (v >> h) * width[h] + (u >> h)]: level-h block (u, v) holds a free cell.
 FreeBlocks = namedtuple('FreeBlocks', 'flags offsets width')
-# The map's size in cells, the number of leaf angles, and the band's options: nodes
-# bounded at or above verdict.keep_floor(the best leaf) are expanded. The search prior: only nodes with a cell within
-# region_r cells of pixel (region_u, region_v) and an angle within region_w angle steps of
+# The map's size in cells, the number of leaf angles, the band's options: nodes bounded at
+# or above verdict.keep_floor(the best leaf) are expanded. The search prior: nodes with a cell
+# within region_r cells of pixel (region_u, region_v), an angle within region_w angle steps of
 # angle index region_a; region_r < 0 / region_w < 0: no bound.
 SearchSpace = namedtuple('SearchSpace', 'map_w map_h n_angles keep_ratio min_confidence band_allowance '
                                        'region_u region_v region_r region_a region_w')
@@ -129,15 +129,15 @@ def region_mask(space, tu, tv, ta, h):
     return out
 
 
-# Counters that one thread writes at every node (a heap's size, expansions per level) are
-# PAD int64s long, only the first few used: two threads' counters in one 64-byte cache
-# line would make each write wait for the other core (false sharing).
+# Counters one thread writes at every node (heap size, expansions per level) are PAD int64s
+# long: two threads' counters in one 64-byte cache line would make each write wait (false sharing).
 PAD = 16
 
 # The pending nodes: a binary max-heap in flat arrays (heapq on a numba typed List calls
 # into the list's C code for every item access). keys[k] = bound x 8 + 7 - level: the highest
-# bound first, the deeper node first among equal bounds (reaching leaves sooner raises
-# the pruning threshold sooner). nodes[k] = (level, u, v, a). size[0]: the heap's size.
+# bound first, the deeper node first among equal bounds (reaching leaves sooner raises the
+# pruning threshold sooner). nodes[k] = (u, v, a) as int32, the level read from the key: 20 bytes
+# a node, not 40 (a search on a 36 Mcell map holds ~2 million). size[0]: the heap's size.
 @njit(cache=True, nogil=True, inline='always')
 def heap_key(bound, level):
     """A node's key; key >> 3 is its bound (levels < 8)."""
@@ -145,13 +145,13 @@ def heap_key(bound, level):
 
 
 @njit(cache=True, nogil=True)
-def heap_push(keys, nodes, size, key, h, u, v, a):
-    """Push a node; returns (keys, nodes), grown when full."""
+def heap_push(keys, nodes, size, key, u, v, a):
+    """Push a node (its level is in its key); returns (keys, nodes), grown when full."""
     n = size[0]
     if n == keys.shape[0]:
         grown_keys = np.empty(2 * n + 16, np.int64)
         grown_keys[:n] = keys
-        grown_nodes = np.empty((2 * n + 16, 4), np.int64)
+        grown_nodes = np.empty((2 * n + 16, 3), np.int32)
         grown_nodes[:n] = nodes
         keys, nodes = grown_keys, grown_nodes
     i = n
@@ -163,7 +163,7 @@ def heap_push(keys, nodes, size, key, h, u, v, a):
         nodes[i] = nodes[up]
         i = up
     keys[i] = key
-    nodes[i, 0], nodes[i, 1], nodes[i, 2], nodes[i, 3] = h, u, v, a
+    nodes[i, 0], nodes[i, 1], nodes[i, 2] = u, v, a
     size[0] = n + 1
     return keys, nodes
 
@@ -171,7 +171,7 @@ def heap_push(keys, nodes, size, key, h, u, v, a):
 @njit(cache=True, nogil=True)
 def heap_pop(keys, nodes, size):
     """Remove the top node; returns (key, level, u, v, a)."""
-    top_key, h, u, v, a = keys[0], nodes[0, 0], nodes[0, 1], nodes[0, 2], nodes[0, 3]
+    top_key, u, v, a = keys[0], np.int64(nodes[0, 0]), np.int64(nodes[0, 1]), np.int64(nodes[0, 2])
     n = size[0] - 1
     size[0] = n
     if n > 0:
@@ -190,13 +190,13 @@ def heap_pop(keys, nodes, size):
             i = child
         keys[i] = key
         nodes[i] = nodes[n]
-    return top_key, h, u, v, a
+    return top_key, 7 - (top_key & 7), u, v, a
 
 
 @njit(cache=True, nogil=True)
 def empty_heap(capacity):
     """(keys, nodes, size) with room for `capacity` nodes (more grow it)."""
-    return np.empty(capacity + 16, np.int64), np.empty((capacity + 16, 4), np.int64), np.zeros(PAD, np.int64)
+    return np.empty(capacity + 16, np.int64), np.empty((capacity + 16, 3), np.int32), np.zeros(PAD, np.int64)
 
 
 @njit(cache=True, nogil=True)
@@ -205,7 +205,7 @@ def make_heap(top_nodes, level):
     n = top_nodes.shape[0]
     keys, nodes, size = empty_heap(n)
     for k in range(n):
-        keys, nodes = heap_push(keys, nodes, size, heap_key(top_nodes[k, 3], level), level,
+        keys, nodes = heap_push(keys, nodes, size, heap_key(top_nodes[k, 3], level),
                                 top_nodes[k, 0], top_nodes[k, 1], top_nodes[k, 2])
     return keys, nodes, size
 
@@ -218,7 +218,7 @@ def split_heap(keys, nodes, size):
     for part in range(2):
         pk, pn, ps = empty_heap((n - part + 1) // 2)
         for i in range(part, n, 2):
-            pk, pn = heap_push(pk, pn, ps, keys[i], nodes[i, 0], nodes[i, 1], nodes[i, 2], nodes[i, 3])
+            pk, pn = heap_push(pk, pn, ps, keys[i], nodes[i, 0], nodes[i, 1], nodes[i, 2])
         out.append((pk, pn, ps))
     return out[0], out[1]
 
@@ -285,7 +285,7 @@ def search_step(planes, tables, free, space, held, heap, shared_best, budget, pe
                     leaves[n_leaves, 3] = cb
                     n_leaves += 1
             elif cb >= hold:
-                keys, nodes = heap_push(keys, nodes, size, heap_key(cb, h - 1), h - 1, cu, cv, ca)
+                keys, nodes = heap_push(keys, nodes, size, heap_key(cb, h - 1), cu, cv, ca)
     return expanded, done, leaves[:n_leaves], (keys, nodes, size)
 
 
