@@ -219,7 +219,7 @@ def test_the_tail_section_says_which_targets_are_met_from_its_rows():
                                                  expansions=400000)] * 3
     changed.append(row('changed', 5.0, 'search_incomplete', True, False, 0.6, expansions=90000))   # the time limit
     logs = [row('carmen', 0.05)] * 20
-    big = [row('big', 0.4, cells=36_000_000, peak_mb=900)] * 3
+    big = [row('big', 0.4, cells=36_000_000, peak_mb=900, search_s=0.3, per_level=[0, 100, 200, 300, 400])] * 3
     text = '\n'.join(tail_section(changed + logs + big))
     lines = {line.split(' | ')[0]: line for line in text.splitlines() if line.startswith('| ')}
     assert '**not met**' in lines['| changed world, level 3: p95 ≤ 1 s']           # 3 s in its tail
@@ -227,3 +227,7 @@ def test_the_tail_section_says_which_targets_are_met_from_its_rows():
     assert lines['| changed world: 0 confident-wrong'].endswith('| 0 | met | |')
     assert '| met |' in next(v for k, v in lines.items() if k.startswith('| real logs'))
     assert '**not met**' in next(v for k, v in lines.items() if 'peak memory' in k)     # 900 MB > 800
+    # 700 of 1000 expansions at the two top levels (blocks of 16 and 8 cells), 0.3 s / 1000
+    big_line = next(v for k, v in lines.items() if '(36 Mcells)' in k)
+    assert '70% of them at the two coarsest levels (blocks of 16 and 8 cells' in big_line
+    assert '300.0 µs each' in big_line

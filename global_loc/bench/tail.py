@@ -67,7 +67,9 @@ def big_map_rows(building: OccupancyMap, size: int, count: int, seed: int, threa
         rows.append({'suite': 'tail', 'kind': 'big', 'map': f'{size}^2', 'cells': size * size, 'method': 'bnb',
                      'time_s': res.time_s, 'success': res.success, 'outcome': res.outcome.label,
                      'ok': res.pose is not None and pose_correct(res.pose, truth),
-                     'expansions': getattr(res.search_stats, 'expansions', None)})
+                     'expansions': getattr(res.search_stats, 'expansions', None),
+                     'search_s': getattr(res.search_stats, 'search_s', None),
+                     'per_level': list(getattr(res.search_stats, 'per_level', ()))})
     peak = round(_peak_rss_bytes() / 1e6)
     return [{**r, 'peak_mb': peak} for r in rows]
 
@@ -119,13 +121,26 @@ def big_lines(rows) -> list[str]:
         out.append(f'| {s[0]["map"]} ({name / 1e6:.0f} Mcells): p95 ≤ {LIMITS["big_p95_s"]:g} s | {secs(p95)} s '
                    f'(median {secs(median)} s, {len(s)} scans, {sum(r["ok"] for r in s)} right) | '
                    f'{_met(p95 <= LIMITS["big_p95_s"])} | median {int(np.median([r["expansions"] or 0 for r in s]))} '
-                   f'expansions; {stops} stopped at the node budget |')
+                   f'expansions; {stops} stopped at the node budget{_coarse_share(s)} |')
     largest = max(rows, key=lambda r: r['cells'], default=None)
     if largest is not None:
         out.append(f'| peak memory on the {largest["map"]} map ≤ {LIMITS["peak_mb"]:g} MB | {largest["peak_mb"]} MB '
                    f'| {_met(largest["peak_mb"] <= LIMITS["peak_mb"])} | the whole process: bnb prepared, '
                    f'{len([r for r in rows if r["cells"] == largest["cells"]])} localizations |')
     return out
+
+
+def _coarse_share(rows) -> str:
+    """Where a big map's expansions go: the share at the two top levels (blocks of 2^(levels-1)
+    and half that: the budget spent before the search narrows down) and the time each took."""
+    levels = [r['per_level'] for r in rows if r.get('per_level')]
+    if not levels:
+        return ''
+    top = float(np.median([sum(p[-2:]) / max(sum(p), 1) for p in levels]))
+    each = float(np.median([r['search_s'] / r['expansions'] for r in rows if r.get('search_s') and r['expansions']]))
+    return (f'; {100 * top:.0f}% of them at the two coarsest levels (blocks of {2 ** (len(levels[0]) - 1)} and '
+            f'{2 ** (len(levels[0]) - 2)} cells: their bounds stay above the band almost everywhere on the '
+            f'building), {1e6 * each:.1f} µs each')
 
 
 def tail_section(rows: list[dict]) -> list[str]:
