@@ -1,8 +1,8 @@
-"""Compiled (numba) inner loops of the branch-and-bound search: a node's bound, the heap
-of pending nodes, and the best-first search itself. numpy cannot walk a search tree one
-node at a time fast enough. Numbers only here: the geometry (angle tables, which plane
-each point reads) is prepared by matcher.py, the planes by grids.py. Compiled on first
-use and cached on disk (numba cache=True).
+"""Compiled (numba) inner loops of the branch-and-bound search: a node's bound and the
+best-first search itself (its pending nodes: heap.py). numpy cannot walk a search tree
+one node at a time fast enough. Numbers only here: the geometry (angle tables, which
+plane each point reads) is prepared by matcher.py, the planes by grids.py. Compiled on
+first use and cached on disk (numba cache=True).
 
 A node is (u, v, a, h): cells u .. u + 2^h - 1, v .. v + 2^h - 1 of the map, angle
 indices a .. a + 2^h - 1. Its bound is the sum over the scan's points of the point's
@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit, uint64
 
 from ...pixel_kernels import image_point
+from .heap import heap_key, heap_pop, heap_push, make_heap, split_heap
 from .verdict import keep_floor
 
 # Plane k starts at flat[offsets[k]]; a level-h plane is stored at 1 / 2^shift[h] of the
@@ -127,100 +128,6 @@ def region_mask(space, tu, tv, ta, h):
     for k in range(len(tu)):
         out[k] = in_region(space, tu[k], tv[k], ta[k], h)
     return out
-
-
-# Counters one thread writes at every node (heap size, expansions per level) are PAD int64s
-# long: two threads' counters in one 64-byte cache line would make each write wait (false sharing).
-PAD = 16
-
-# The pending nodes: a binary max-heap in flat arrays (heapq on a numba typed List calls
-# into the list's C code for every item access). keys[k] = bound x 8 + 7 - level: the highest
-# bound first, the deeper node first among equal bounds (reaching leaves sooner raises the
-# pruning threshold sooner). nodes[k] = (u, v, a) as int32, the level read from the key: 20 bytes
-# a node, not 40 (a search on a 36 Mcell map holds ~2 million). size[0]: the heap's size.
-@njit(cache=True, nogil=True, inline='always')
-def heap_key(bound, level):
-    """A node's key; key >> 3 is its bound (levels < 8)."""
-    return bound * 8 + 7 - level
-
-
-@njit(cache=True, nogil=True)
-def heap_push(keys, nodes, size, key, u, v, a):
-    """Push a node (its level is in its key); returns (keys, nodes), grown when full."""
-    n = size[0]
-    if n == keys.shape[0]:
-        grown_keys = np.empty(2 * n + 16, np.int64)
-        grown_keys[:n] = keys
-        grown_nodes = np.empty((2 * n + 16, 3), np.int32)
-        grown_nodes[:n] = nodes
-        keys, nodes = grown_keys, grown_nodes
-    i = n
-    while i > 0:
-        up = (i - 1) >> 1
-        if keys[up] >= key:
-            break
-        keys[i] = keys[up]
-        nodes[i] = nodes[up]
-        i = up
-    keys[i] = key
-    nodes[i, 0], nodes[i, 1], nodes[i, 2] = u, v, a
-    size[0] = n + 1
-    return keys, nodes
-
-
-@njit(cache=True, nogil=True)
-def heap_pop(keys, nodes, size):
-    """Remove the top node; returns (key, level, u, v, a)."""
-    top_key, u, v, a = keys[0], np.int64(nodes[0, 0]), np.int64(nodes[0, 1]), np.int64(nodes[0, 2])
-    n = size[0] - 1
-    size[0] = n
-    if n > 0:
-        key = keys[n]
-        i = 0
-        while True:
-            child = 2 * i + 1
-            if child >= n:
-                break
-            if child + 1 < n and keys[child + 1] > keys[child]:
-                child += 1
-            if keys[child] <= key:
-                break
-            keys[i] = keys[child]
-            nodes[i] = nodes[child]
-            i = child
-        keys[i] = key
-        nodes[i] = nodes[n]
-    return top_key, 7 - (top_key & 7), u, v, a
-
-
-@njit(cache=True, nogil=True)
-def empty_heap(capacity):
-    """(keys, nodes, size) with room for `capacity` nodes (more grow it)."""
-    return np.empty(capacity + 16, np.int64), np.empty((capacity + 16, 3), np.int32), np.zeros(PAD, np.int64)
-
-
-@njit(cache=True, nogil=True)
-def make_heap(top_nodes, level):
-    """A heap of the top-level nodes, rows (u, v, a, bound): (keys, nodes, size)."""
-    n = top_nodes.shape[0]
-    keys, nodes, size = empty_heap(n)
-    for k in range(n):
-        keys, nodes = heap_push(keys, nodes, size, heap_key(top_nodes[k, 3], level),
-                                top_nodes[k, 0], top_nodes[k, 1], top_nodes[k, 2])
-    return keys, nodes, size
-
-
-@njit(cache=True, nogil=True)
-def split_heap(keys, nodes, size):
-    """Deal a heap's nodes alternately into two new heaps (for a thread whose own ran out)."""
-    n = size[0]
-    out = []
-    for part in range(2):
-        pk, pn, ps = empty_heap((n - part + 1) // 2)
-        for i in range(part, n, 2):
-            pk, pn = heap_push(pk, pn, ps, keys[i], nodes[i, 0], nodes[i, 1], nodes[i, 2])
-        out.append((pk, pn, ps))
-    return out[0], out[1]
 
 
 @njit(cache=True, nogil=True)

@@ -179,7 +179,7 @@ class BranchAndBoundMatcher(Matcher):
             if len(tu) == 0:
                 return None
             tables = self.tables(pts, 2 * math.pi / n_angles, n_angles)
-            bounds = node_bounds(self.stack.planes, tables, tu, tv, ta, top)
+            bounds = self.searcher.node_bounds(self.stack.planes, tables, tu, tv, ta, top)
             # one scan's top nodes and tables kept: a map set searches each map several times
             # with one scan (core.map_set), and they take a few ms to build on a large map
             self._last_tops = (key, (n_angles, space, tu, tv, ta, tables, bounds))

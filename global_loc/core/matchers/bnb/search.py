@@ -21,7 +21,8 @@ import cv2
 import numpy as np
 
 from ..base import ProgressFn
-from .kernels import PAD, FreeBlocks, Planes, ScanTables, SearchSpace, dive, make_heap, search_step, split_heap
+from .heap import PAD, make_heap, split_heap
+from .kernels import FreeBlocks, Planes, ScanTables, SearchSpace, dive, node_bounds, search_step
 from .verdict import keep_floor
 
 
@@ -87,6 +88,16 @@ class ThreadedSearch:
             if self._pool is None or self._pool_threads != threads:
                 self._pool, self._pool_threads = ThreadPoolExecutor(threads, thread_name_prefix='bnb'), threads
             return self._pool
+
+    def node_bounds(self, planes: Planes, tables: ScanTables, tu, tv, ta, level: int) -> np.ndarray:
+        """kernels.node_bounds on every search thread, the nodes in one chunk a thread (the
+        top nodes of a 36 Mcell map take ~0.1 s on one core); the same integers."""
+        threads = search_threads()
+        if threads == 1 or len(tu) < 4096:
+            return node_bounds(planes, tables, tu, tv, ta, level)
+        chunks = zip(*(np.array_split(x, threads) for x in (tu, tv, ta)), strict=True)     # views, in order
+        return np.concatenate(list(self._executor(threads).map(
+            lambda chunk: node_bounds(planes, tables, *chunk, level), chunks)))
 
     def run(self, planes: Planes, tables: ScanTables, free: FreeBlocks, space: SearchSpace, top_nodes: np.ndarray,
             top_level: int, max_nodes: int, progress: Optional[ProgressFn],
