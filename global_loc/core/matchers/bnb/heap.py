@@ -9,11 +9,11 @@ from numba import njit
 # long: two threads' counters in one 64-byte cache line would make each write wait (false sharing).
 PAD = 16
 
-# The pending nodes: a binary max-heap in flat arrays (heapq on a numba typed List calls
-# into the list's C code for every item access). keys[k] = bound x 8 + 7 - level: the highest
-# bound first, the deeper node first among equal bounds (reaching leaves sooner raises the
-# pruning threshold sooner). nodes[k] = (u, v, a) as int32, the level read from the key: 20 bytes
-# a node, not 40 (a search on a 36 Mcell map holds ~2 million). size[0]: the heap's size.
+# Flat arrays, not heapq on a numba typed List (which calls into the list's C code for every
+# item access). keys[k] = bound x 8 + 7 - level: the highest bound first, the deeper node first
+# among equal bounds (reaching leaves sooner raises the pruning threshold sooner). nodes[k] =
+# (u, v, a) as int32, the level read from the key: 20 bytes a node, not 40 (a search on a 36
+# Mcell map holds ~2 million). size[0]: the heap's size.
 @njit(cache=True, nogil=True, inline='always')
 def heap_key(bound, level):
     """A node's key; key >> 3 is its bound (levels < 8)."""
@@ -78,8 +78,8 @@ def empty_heap(capacity):
 @njit(cache=True, nogil=True)
 def make_heap(top_nodes, level):
     """A heap of the top-level nodes, rows (u, v, a, bound) in descending bound order, which
-    is a max-heap as it stands (the array pushing them one by one would build, without its
-    sifts: 0.1 s on a 36 Mcell map's 350 000 top nodes): (keys, nodes, size)."""
+    is a max-heap as it stands: the array pushing them one by one would build, without the
+    pushes (~0.03 s a search on a 36 Mcell map's 350 000 top nodes): (keys, nodes, size)."""
     n = top_nodes.shape[0]
     keys, nodes, size = empty_heap(n)
     for k in range(n):

@@ -93,7 +93,7 @@ class ThreadedSearch:
         """kernels.node_bounds on every search thread, the nodes in one chunk a thread (the
         top nodes of a 36 Mcell map take ~0.1 s on one core); the same integers."""
         threads = search_threads()
-        if threads == 1 or len(tu) < 4096:
+        if threads == 1 or len(tu) < 4096:       # few nodes (small maps): this thread
             return node_bounds(planes, tables, tu, tv, ta, level)
         chunks = zip(*(np.array_split(x, threads) for x in (tu, tv, ta)), strict=True)     # views, in order
         return np.concatenate(list(self._executor(threads).map(
