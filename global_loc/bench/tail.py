@@ -69,7 +69,9 @@ def big_map_rows(building: OccupancyMap, size: int, count: int, seed: int, threa
                      'ok': res.pose is not None and pose_correct(res.pose, truth),
                      'expansions': getattr(res.search_stats, 'expansions', None),
                      'search_s': getattr(res.search_stats, 'search_s', None),
-                     'per_level': list(getattr(res.search_stats, 'per_level', ()))})
+                     'per_level': list(getattr(res.search_stats, 'per_level', ())),
+                     'top_nodes': getattr(res.search_stats, 'top_nodes', None),
+                     'top_in_band': getattr(res.search_stats, 'top_in_band', None)})
     peak = round(_peak_rss_bytes() / 1e6)
     return [{**r, 'peak_mb': peak} for r in rows]
 
@@ -92,9 +94,12 @@ def changed_lines(rows) -> list[str]:
     by_map = ', '.join(f'{name} {len(s)} (best score median {np.median([r.get("score") or 0 for r in s]):.2f})'
                        for name, s in sorted(group(stops, lambda r: r['map']).items()))
     named = '; '.join(f"{r['map']} score {r.get('score') or 0:.2f}" for r in explained)
+    banded = [r['top_in_band'] / r['top_nodes'] for r in stops if r.get('top_in_band') and r.get('top_nodes')]
+    in_band = (f'; top nodes bounded within their final band (each one an exhaustive search expands): median '
+               f'{100 * np.median(banded):.0f}%' if banded else '')
     return [f'| changed world, level {CHANGE_LEVELS[-1]}: p95 ≤ {LIMITS["changed_p95_s"]:g} s | {secs(p95)} s '
             f'(median {secs(median)} s, {len(rows)} scans) | {_met(p95 <= LIMITS["changed_p95_s"])} | the p95 is the '
-            f'{len(stops)} searches stopped at the node budget: {by_map or "none"} |',
+            f'{len(stops)} searches stopped at the node budget: {by_map or "none"}{in_band} |',
             f'| changed world: no node-budget stop on a scan the map explains (best score ≥ {EXPLAINED_SCORE:.2f}) '
             f'| {len(explained)} of {len(stops)} stops | {_met(not explained)} | '
             f'{named or "-"} |',
@@ -132,15 +137,25 @@ def big_lines(rows) -> list[str]:
 
 def _coarse_share(rows) -> str:
     """Where a big map's expansions go: the share at the two top levels (blocks of 2^(levels-1)
-    and half that: the budget spent before the search narrows down) and the time each took."""
+    and half that: the budget spent before the search narrows down), the time each took,
+    and the top nodes within the final band (an exhaustive search expands every one of
+    them: the least it needs) against those the budget reached."""
     levels = [r['per_level'] for r in rows if r.get('per_level')]
     if not levels:
         return ''
     top = float(np.median([sum(p[-2:]) / max(sum(p), 1) for p in levels]))
     each = float(np.median([r['search_s'] / r['expansions'] for r in rows if r.get('search_s') and r['expansions']]))
-    return (f'; {100 * top:.0f}% of them at the two coarsest levels (blocks of {2 ** (len(levels[0]) - 1)} and '
-            f'{2 ** (len(levels[0]) - 2)} cells: their bounds stay above the band almost everywhere on the '
-            f'building), {1e6 * each:.1f} µs each')
+    line = (f'; {100 * top:.0f}% of them at the two coarsest levels (blocks of {2 ** (len(levels[0]) - 1)} and '
+            f'{2 ** (len(levels[0]) - 2)} cells), {1e6 * each:.1f} µs each')
+    banded = [r for r in rows if r.get('top_in_band') and r.get('top_nodes') and r.get('per_level')]
+    if banded:
+        share = np.median([r['top_in_band'] / r['top_nodes'] for r in banded])
+        least = int(np.median([r['top_in_band'] for r in banded]))
+        reached = np.median([r['per_level'][-1] / r['top_in_band'] for r in banded])
+        line += (f'; {100 * share:.0f}% of the top nodes are bounded within the final band ({least} nodes: the '
+                 f'least an exhaustive search expands, {secs(least * each)} s at that rate before any level '
+                 f'below), the budget expanded {100 * reached:.0f}% of them')
+    return line
 
 
 def tail_section(rows: list[dict]) -> list[str]:

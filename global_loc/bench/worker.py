@@ -52,7 +52,8 @@ def run_job(job):
     search_s = getattr(res.search_stats, 'search_s', None)
     if search_s is not None:      # bnb: the search proper, apart from the fixed work around it
         row.update(search_s=search_s, expansions=res.search_stats.expansions, settled=res.search_stats.settled,
-                   hypotheses=len(res.hypotheses))
+                   hypotheses=len(res.hypotheses), top_nodes=res.search_stats.top_nodes,
+                   top_in_band=res.search_stats.top_in_band)
     if res.pose is None:
         row.update(ok=False, ok_loose=False)
     else:

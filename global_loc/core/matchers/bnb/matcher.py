@@ -40,7 +40,7 @@ from .kernels import warm_up as warm_up_search
 from .options import BranchAndBoundOptions
 from .refine import bin_maxima, landscape_covariance, refine
 from .refine import warm_up as warm_up_refine
-from .search import Resume, SearchRun, SearchStats, SettledFn, ThreadedSearch, search_threads
+from .search import Resume, SearchRun, SearchStats, SettledFn, ThreadedSearch, search_threads, top_in_band
 from .verdict import REFINED_GAIN, explained_share, judge, keep_floor, needed_lead, unscored_could_be_confident
 
 
@@ -186,10 +186,11 @@ class BranchAndBoundMatcher(Matcher):
         d0 = 2 * math.pi / n_angles
         # 2. Branch and bound down to the band below the best leaf (verdict.searched_keep).
         search_start = time.perf_counter()
+        resume = self.resume_rule(space, pts, d0, points)
         run = self.searcher.run(self.stack.planes, tables, self.stack.free, space,
                                 np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, max_nodes, progress,
                                 deadline, self.settled_check(pts, d0, points),
-                                int(options.incumbent * 255 * len(pts)), self.resume_rule(space, pts, d0, points))
+                                int(options.incumbent * 255 * len(pts)), resume)
         search_s = time.perf_counter() - search_start
         scores = run.leaves[:, 3] / (255.0 * len(pts))
         expansions = int(run.per_level.sum())
@@ -200,7 +201,9 @@ class BranchAndBoundMatcher(Matcher):
                             expansions=expansions, per_level=tuple(run.per_level.tolist()), top_nodes=len(tu),
                             threads=search_threads(), best_leaf=float(scores.max()) if len(scores) else 0.0,
                             search_s=search_s, settled=run.settled,
-                            band_allowance=1.0 if run.resumed else opt.band_allowance)
+                            band_allowance=1.0 if run.resumed else opt.band_allowance,
+                            top_in_band=top_in_band(bounds, resume.space if run.resumed else space, run.leaves,
+                                                    len(pts)))
         return TreeSearch(pts, d0, run, stats, stopped)
 
     def resume_rule(self, space: SearchSpace, pts, d0, points: ScanPoints) -> Optional[Resume]:

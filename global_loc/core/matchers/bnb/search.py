@@ -42,6 +42,8 @@ class SearchStats:
                            # tables or refining, checking and ranking the peaks
     settled: bool = False  # it ended early: its answer could not become confident (matcher.settled_check)
     band_allowance: float = 1.0   # the band it searched (the option's, or 1 once resumed with the whole band)
+    top_in_band: int = 0   # top nodes bounded within the final best's band: each must be expanded for an
+                           # exhaustive search (the least it needs, whatever the levels below prune)
 
 
 # settled(leaves kept so far, highest pending bound (raw)) -> whether the search may end there
@@ -192,3 +194,12 @@ def kept_leaves(found: list[np.ndarray], space: SearchSpace, best: int, n_points
     _, first = np.unique((leaves[:, 0] * space.map_h + leaves[:, 1]) * space.n_angles + leaves[:, 2],
                          return_index=True)
     return leaves[first]
+
+
+def top_in_band(bounds: np.ndarray, space: SearchSpace, leaves: np.ndarray, n_points: int) -> int:
+    """How many top nodes (their raw bounds) reach the band of the best of `leaves` (rows u,
+    v, a, raw score) on n_points points: nodes an exhaustive search has to expand, so a
+    lower limit on the expansions it needs (on a large building most top bounds are near a
+    full fit)."""
+    best = int(leaves[:, 3].max(initial=0))
+    return int(np.count_nonzero(bounds >= keep_floor(space, best, n_points)))
