@@ -99,7 +99,9 @@ def test_the_search_is_not_settled_before_its_best_leaf_is_known(office_map):
     points = scan_to_points(scan_of(np.random.default_rng(3).uniform(0.5, 3.0, len(ANGLES))))
     pts = matcher.prepare(points.points)
     norm = 255 * len(pts)
-    leaves = np.array([[100, 100, 0, int(0.2 * norm)], [300, 200, 7, int(0.19 * norm)]], np.int64)
+    # columns: u, v, heading, optimistic score, evidence score (the map's own say)
+    leaves = np.array([[100, 100, 0, int(0.2 * norm), int(0.2 * norm)],
+                       [300, 200, 7, int(0.19 * norm), int(0.19 * norm)]], np.int64)
     d0 = 2 * np.pi / matcher.leaf_angles(pts)
     settled = matcher.settled_check(pts, d0, points)
     assert not settled(leaves, int(0.25 * norm))     # a pending node bounds above the best leaf

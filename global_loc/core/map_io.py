@@ -30,6 +30,17 @@ class MapError(ValueError):
     """A map could not be loaded or is malformed; the message names the file and the problem."""
 
 
+def occupied_cells(occupancy: np.ndarray) -> np.ndarray:
+    """Where occupancy values (100 / 0 / -1, or a 0..100 scale) mean an occupied cell."""
+    return occupancy >= 65
+
+
+def free_cells(occupancy: np.ndarray) -> np.ndarray:
+    """Where occupancy values mean a free cell (the rest of the known, between the two
+    thresholds, and -1 are unknown)."""
+    return (occupancy >= 0) & (occupancy < 35)
+
+
 @dataclass
 class OccupancyMap:
     occupancy: np.ndarray          # int8 (H, W), image row order, 100 / 0 / -1
@@ -60,11 +71,16 @@ class OccupancyMap:
     @property
     def occupied(self) -> np.ndarray:
         """Boolean mask of occupied cells."""
-        return self.occupancy >= 65
+        return occupied_cells(self.occupancy)
 
     @property
     def free(self) -> np.ndarray:
-        return (self.occupancy >= 0) & (self.occupancy < 35)
+        return free_cells(self.occupancy)
+
+    @property
+    def unknown(self) -> np.ndarray:
+        """Boolean mask of cells the map says nothing about (neither occupied nor free)."""
+        return ~(self.occupied | self.free)
 
     def is_free_at(self, xy) -> np.ndarray:
         """True where the world points fall on free cells inside the map."""
@@ -74,12 +90,30 @@ class OccupancyMap:
         out[inside] = self.free[cells[inside, 1], cells[inside, 0]]
         return out
 
-    def distance_to_occupied(self) -> np.ndarray:
-        """float32 (H, W): each cell's distance in cells to the nearest occupied cell
-        (1e6 everywhere on a map without one)."""
-        if not self.occupied.any():
+    def open_unknown(self) -> np.ndarray:
+        """Boolean mask of the unknown cells a beam can reach through free space: the
+        8-connected regions of unknown cells that touch a free cell (a part of the place
+        never mapped, seen through a frontier). An unknown region closed off by occupied
+        cells - the outside of a walled building, the inside of a thick wall - is left out:
+        a beam reaches it only through a mapped wall."""
+        unknown = self.unknown.astype(np.uint8)
+        if not unknown.any():
+            return unknown.astype(bool)
+        count, labels = cv2.connectedComponents(unknown, connectivity=8)
+        touching = cv2.dilate(self.free.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+        open_labels = np.zeros(count, bool)
+        open_labels[np.unique(labels[touching & (unknown > 0)])] = True
+        open_labels[0] = False          # label 0: the known cells
+        return open_labels[labels]
+
+    def distance_to_occupied(self, also: Optional[np.ndarray] = None) -> np.ndarray:
+        """float32 (H, W): each cell's distance in cells to the nearest occupied cell, or
+        cell of `also` (a mask: where a wall may stand for all the map says) - 1e6
+        everywhere on a map without one."""
+        target = self.occupied | also if also is not None else self.occupied
+        if not target.any():
             return np.full(self.occupancy.shape, 1e6, np.float32)
-        return cv2.distanceTransform((~self.occupied).astype(np.uint8), cv2.DIST_L2, 5)
+        return cv2.distanceTransform((~target).astype(np.uint8), cv2.DIST_L2, 5)
 
     def obstacle_image(self) -> np.ndarray:
         """uint8 image, 255 on occupied cells and 0 elsewhere (the matchers' polarity)."""

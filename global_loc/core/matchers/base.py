@@ -43,6 +43,10 @@ class Candidate:
     covariance: Optional[np.ndarray] = None   # 3x3 (x, y, yaw) of laser_pose, when the matcher knows it
     explained: Optional[float] = None      # bnb: fraction of the scan's points the map explains at this pose
     see_through: Optional[float] = None    # bnb: fraction of the beams that would pass through mapped walls
+    # bnb: the field score were every unknown cell near the points a wall (what the map cannot
+    # rule out: >= explained), and the share of the points on unknown cells or off the map
+    optimistic: Optional[float] = None
+    unknown: Optional[float] = None
 
 
 # Distinct hypotheses, for every matcher (bnb declares them as options with these defaults):

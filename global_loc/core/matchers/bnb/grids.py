@@ -3,6 +3,8 @@ bounds read, and which blocks of the map hold a free cell (Cartographer's
 PrecomputationGridStack2D). The search only reads them."""
 from __future__ import annotations
 
+from typing import Optional
+
 import cv2
 import numpy as np
 
@@ -17,10 +19,15 @@ PLANE_SHIFT_FROM = 3                   # planes of level h > this are stored at 
 
 
 class PrecomputationGridStack:
-    """Per map, built once: the likelihood field (uint8: a view of the first plane); per
-    level and widening a uint8 plane whose cell holds the field's maximum over the block
-    starting there and the widening around it (`grid_ids` picks one per point); per
-    level, whether each block holds a free cell. Memory: `nbytes`.
+    """Per map, built once: the likelihood field (uint8, `field`: what the map explains);
+    the optimistic field (`optimistic`: unknown cells a beam can reach may hide a wall, so a
+    point there, or near one, may be explained - OccupancyMap.open_unknown; the same as
+    `field` on a map with none); per level and widening a uint8 plane whose cell holds the
+    optimistic field's maximum over the block starting there and the widening around it
+    (`grid_ids` picks one per point), and where the map has such unknown cells the same
+    planes of the evidence field, so that a bound never rules out a place for what the map
+    does not say (kernels: the two scores); per level, whether each block holds a free
+    cell. Memory: `nbytes`.
 
     The search is bound by memory latency (a node reads ~200 scattered cells), so the
     planes are kept small: a level-h plane (windows of 2^h cells and more) is stored at
@@ -41,42 +48,64 @@ class PrecomputationGridStack:
             raise ValueError(f'bnb levels must be 1 .. {most}, got {options.levels}')
         # Built in the order that keeps the peak low: the planes, the largest part, last, and
         # every array written where it is kept (36 Mcells: peak 1038 -> 881 MB, see fill_planes).
-        field = likelihood_field(occupancy_map, options.sigma_cells)
+        open_unknown = occupancy_map.open_unknown()
+        has_unknown = bool(open_unknown.any())
+        field = likelihood_field(occupancy_map, options.sigma_cells, also=open_unknown if has_unknown else None)
+        del open_unknown
         self.occupied = occupancy_map.occupied.view(np.uint8)     # 0 / 1 for the free-space check, no copy
+        self.occupancy = occupancy_map.occupancy    # the map's own cells (no copy): which are unknown (free_space)
         self.free = free_blocks(occupancy_map.free, options.levels)
         p = (2 ** top) + 2 * int(self.margin(top)) + 2
-        # Level h reads widenings from margin(h, ~0) (1 cell of rounding for h > 0) up to
-        # margin(h): only those planes are kept.
+        self.index_planes(options.levels)
+        # The finest storage whose planes fit options.plane_memory_mb (coarser from a lower
+        # level: looser bounds, more nodes; the leaves' level 0 is always whole).
+        # (best effort: below shift_from 1 nothing is coarser - the budget may be exceeded)
+        sets = 2 if has_unknown else 1      # the optimistic planes and their evidence twins
+        for shift_from in range(PLANE_SHIFT_FROM, 0, -1):
+            shift, height, width, sizes = self.plane_layout(field.shape, p, shift_from)
+            if sets * sum(sizes) <= options.plane_memory_mb * 1e6:
+                break
+        self.shift_from = shift_from
+        self.offsets = np.cumsum([0] + sizes[:-1]).astype(np.int64)
+        # Where the map has unknown cells a beam can reach, the evidence field's planes (unknown
+        # counts for nothing) follow the optimistic ones, laid out alike (kernels.Planes);
+        # without any, one set is both (evidence offset 0).
+        evidence = sum(sizes) if has_unknown else 0
+        flat = np.empty(sets * sum(sizes), np.uint8)
+        layout = [(h, m, int(shift[h]), int(o)) for (h, m), o in zip(self.index, self.offsets, strict=True)]
+        fill_planes(flat, field, p, (height, width), layout)
+        shape = field.shape
+        del field
+        if has_unknown:
+            fill_planes(flat[evidence:], likelihood_field(occupancy_map, options.sigma_cells), p, (height, width),
+                        layout)
+        # The refinement reads the fields as the leaves' planes store them, rint(255 x
+        # likelihood) (refine.FIELD_UNIT), through views without their frame: the float
+        # fields (4 bytes a cell, 144 MB on 36 Mcells) are not kept, and a refined pose
+        # scores what its leaf did
+        self.optimistic = flat[:height * width].reshape(height, width)[p:p + shape[0], p:p + shape[1]]
+        self.field = flat[evidence:evidence + height * width].reshape(height, width)[p:p + shape[0], p:p + shape[1]]
+        self.planes = Planes(flat, shift, np.array([width >> int(s) for s in shift], np.int64), p, width, height,
+                             evidence)
+        # the evidence planes alone (the search for the best place: kernels.Planes with one set)
+        self.evidence_planes = self.planes._replace(flat=flat[evidence:], evidence=0) if has_unknown else self.planes
+        self.has_unknown = has_unknown
+        self.nbytes = self.planes.flat.nbytes + self.free.flags.nbytes + self.occupied.nbytes
+
+    def index_planes(self, levels: int) -> None:
+        """Which planes are kept: level h reads widenings from margin(h, ~0) (1 cell of
+        rounding for h > 0) up to margin(h), only those."""
         self.index: dict[tuple[int, int], int] = {}
-        for h in range(options.levels):
+        for h in range(levels):
             for m in MARGINS:
                 if m >= self.margin(h, 1e-6):
                     self.index[h, m] = len(self.index)
                     if m >= self.margin(h):
                         break
         # per level: its kept widenings, ascending, and their planes' indices (grid_ids looks them up)
-        self.level_margins = [np.array([m for (k, m) in self.index if k == h], np.int64) for h in range(options.levels)]
+        self.level_margins = [np.array([m for (k, m) in self.index if k == h], np.int64) for h in range(levels)]
         self.level_grids = [np.array([i for (k, _), i in self.index.items() if k == h], np.int64)
-                            for h in range(options.levels)]
-        # The finest storage whose planes fit options.plane_memory_mb (coarser from a lower
-        # level: looser bounds, more nodes; the leaves' level 0 is always whole).
-        # (best effort: below shift_from 1 nothing is coarser - the budget may be exceeded)
-        for shift_from in range(PLANE_SHIFT_FROM, 0, -1):
-            shift, height, width, sizes = self.plane_layout(field.shape, p, shift_from)
-            if sum(sizes) <= options.plane_memory_mb * 1e6:
-                break
-        self.shift_from = shift_from
-        self.offsets = np.cumsum([0] + sizes[:-1]).astype(np.int64)
-        flat = np.empty(sum(sizes), np.uint8)
-        fill_planes(flat, field, p, (height, width),
-                    [(h, m, int(shift[h]), int(o)) for (h, m), o in zip(self.index, self.offsets, strict=True)])
-        # The refinement reads the field as the leaves' plane stores it, rint(255 x likelihood)
-        # (refine.FIELD_UNIT), through a view without its frame: the float field (4 bytes a
-        # cell, 144 MB on 36 Mcells) is not kept, and a refined pose scores what its leaf did
-        self.field = flat[:height * width].reshape(height, width)[p:p + field.shape[0], p:p + field.shape[1]]
-        del field
-        self.planes = Planes(flat, shift, np.array([width >> int(s) for s in shift], np.int64), p, width, height)
-        self.nbytes = self.planes.flat.nbytes + self.free.flags.nbytes + self.occupied.nbytes
+                            for h in range(levels)]
 
     def plane_layout(self, shape: tuple[int, int], p: int, shift_from: int):
         """Planes of levels above shift_from stored at 1 / 2^(h - shift_from) resolution, for
@@ -113,10 +142,11 @@ class PrecomputationGridStack:
         return out
 
 
-def likelihood_field(occupancy_map: OccupancyMap, sigma_cells: float) -> np.ndarray:
+def likelihood_field(occupancy_map: OccupancyMap, sigma_cells: float, also: Optional[np.ndarray] = None) -> np.ndarray:
     """float32 (H, W): exp(-d^2 / 2 sigma^2) of each cell's distance d to the nearest
-    occupied cell, computed in place (no float temporaries of the map's size)."""
-    field = occupancy_map.distance_to_occupied().astype(np.float32, copy=False)
+    occupied cell (or cell of `also`: unknown cells a beam can reach, where the most the map
+    allows is a wall), computed in place (no float temporaries of the map's size)."""
+    field = occupancy_map.distance_to_occupied(also).astype(np.float32, copy=False)
     np.square(field, out=field)
     field *= np.float32(-1.0 / (2.0 * sigma_cells ** 2))
     np.exp(field, out=field)

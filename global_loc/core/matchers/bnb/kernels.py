@@ -9,6 +9,14 @@ indices a .. a + 2^h - 1. Its bound is the sum over the scan's points of the poi
 plane (the one widened for its range) at the point's cell, the point rotated by the
 node's middle angle (row row_start[h] + a >> h of the offset tables), an integer.
 
+Two scores per pose: the evidence (what the map explains: unknown cells count for
+nothing), by which the best leaf, and so the band, is chosen; and the optimistic score,
+which the bounds bound and the band is cut by, so that a place is never pruned for what
+the map does not say: unknown cells a beam can reach may hide a wall (the optimistic
+planes), but at most verdict.MAX_UNKNOWN_SHARE of the scan is credited that way - the
+score is min(optimistic sum, evidence sum + that share), both sums bounded by their own
+planes (a map without unknown cells has one set, and the two scores are one).
+
 The kernels take named tuples (numba compiles attribute reads to plain loads): `Planes`
 (per map: where a plane's cell is in the one flat array), `ScanTables` (per scan: each
 point's offsets and planes), `FreeBlocks` (per map) and `SearchSpace`.
@@ -27,11 +35,16 @@ from .verdict import keep_floor
 
 # Plane k starts at flat[offsets[k]]; a level-h plane is stored at 1 / 2^shift[h] of the
 # map's resolution, plane_width[h] cells wide; (width, height): the padded map, pad: its
-# margin in cells (see grids.PrecomputationGridStack).
-Planes = namedtuple('Planes', 'flat shift plane_width pad width height')
+# margin in cells; evidence: how far after each optimistic plane its evidence twin starts
+# (0 on a map without unknown cells: one set of planes is both) (see
+# grids.PrecomputationGridStack).
+Planes = namedtuple('Planes', 'flat shift plane_width pad width height evidence')
 # base[h, i]: where the plane point i reads at level h starts; du, dv[row, i]: point i's
-# cell offset at the angle of `row`; level h's rows start at row_start[h].
-ScanTables = namedtuple('ScanTables', 'base du dv row_start')
+# cell offset at the angle of `row`; level h's rows start at row_start[h]; credit: the most
+# a pose's optimistic score may exceed its evidence (raw: verdict.MAX_UNKNOWN_SHARE of the
+# points taken as explained on unknown cells; a value, not a compiled-in constant, so a
+# change reaches the cached kernels).
+ScanTables = namedtuple('ScanTables', 'base du dv row_start credit')
 # flags[offsets[h] + (v >> h) * width[h] + (u >> h)]: level-h block (u, v) holds a free cell.
 FreeBlocks = namedtuple('FreeBlocks', 'flags offsets width')
 # The map's size in cells, the number of leaf angles, the band's options: nodes bounded at
@@ -53,40 +66,65 @@ def plane_value(planes, start, h, x, y):
 
 
 @njit(cache=True, nogil=True)
-def point_values(planes, tables, u, v, a, h, out):
-    """Each point's term of the node's bound, into out."""
+def point_values(planes, tables, u, v, a, h, out, plane_shift):
+    """Each point's term of the node's bound, into out: from the optimistic planes
+    (plane_shift 0) or their evidence twins (plane_shift planes.evidence)."""
     row = tables.row_start[h] + (a >> h)
     for i in range(tables.du.shape[1]):
-        out[i] = plane_value(planes, tables.base[h, i], h, u + planes.pad + tables.du[row, i],
+        out[i] = plane_value(planes, tables.base[h, i] + plane_shift, h, u + planes.pad + tables.du[row, i],
                              v + planes.pad + tables.dv[row, i])
 
 
 @njit(cache=True, nogil=True)
-def child_bound(planes, tables, u, v, a, h, parent, parent_rest, floor):
-    """A child's bound, each point's term capped by its parent's (parent[i]): every leaf
-    under the child is under the parent, whose term bounds the leaf's for each point,
-    so the capped sum is still a bound, and a tighter one. Capped terms never exceed the
-    parent's, so as soon as the sum so far plus the parent's terms for the points left
-    (parent_rest[i + 1]) is below `floor`, the child is pruned: the value returned is
-    then below `floor` too. Most children are pruned, most of them after a few points."""
+def node_bound(planes, tables, u, v, a, h, terms):
+    """(bound, evidence bound) of node (u, v, a, h); at level 0 a pose's exact (score,
+    evidence). terms: scratch, one per point."""
+    point_values(planes, tables, u, v, a, h, terms, 0)
+    total = terms.sum()
+    if planes.evidence == 0:
+        return total, total
+    point_values(planes, tables, u, v, a, h, terms, planes.evidence)
+    ev = terms.sum()
+    return min(total, ev + tables.credit), ev
+
+
+@njit(cache=True, nogil=True)
+def child_bound(planes, tables, u, v, a, h, parent, parent_rest, ev_parent, ev_rest, floor):
+    """A child's (bound, evidence bound), each point's terms capped by its parent's
+    (parent[i], ev_parent[i]): every leaf under the child is under the parent, whose terms
+    bound the leaf's for each point, so the capped sums are still bounds, and tighter ones.
+    Capped terms never exceed the parent's, so as soon as the sums so far plus the parent's
+    terms for the points left (parent_rest[i + 1], ev_rest[i + 1]) bound below `floor`, the
+    child is pruned: the bound returned is then below `floor` too. Most children are
+    pruned, most of them after a few points."""
     row = tables.row_start[h] + (a >> h)
     total = 0
+    if planes.evidence == 0:
+        for i in range(tables.du.shape[1]):
+            total += min(plane_value(planes, tables.base[h, i], h, u + planes.pad + tables.du[row, i],
+                                     v + planes.pad + tables.dv[row, i]), parent[i])
+            if total + parent_rest[i + 1] < floor:
+                return total, total
+        return total, total
+    credit = tables.credit
+    ev = 0
     for i in range(tables.du.shape[1]):
-        total += min(plane_value(planes, tables.base[h, i], h, u + planes.pad + tables.du[row, i],
-                                 v + planes.pad + tables.dv[row, i]), parent[i])
-        if total + parent_rest[i + 1] < floor:
-            return total
-    return total
+        x = u + planes.pad + tables.du[row, i]
+        y = v + planes.pad + tables.dv[row, i]
+        total += min(plane_value(planes, tables.base[h, i], h, x, y), parent[i])
+        ev += min(plane_value(planes, tables.base[h, i] + planes.evidence, h, x, y), ev_parent[i])
+        if min(total + parent_rest[i + 1], ev + ev_rest[i + 1] + credit) < floor:
+            return min(total, ev + credit), ev
+    return min(total, ev + credit), ev
 
 
 @njit(cache=True, nogil=True)
 def node_bounds(planes, tables, tu, tv, ta, h):
-    """The bounds of nodes (tu, tv, ta) at level h: the sums of their points' terms."""
+    """The bounds of nodes (tu, tv, ta) at level h."""
     out = np.empty(len(tu), np.int64)
     terms = np.empty(tables.du.shape[1], np.int64)
     for k in range(len(tu)):
-        point_values(planes, tables, tu[k], tv[k], ta[k], h, terms)
-        out[k] = terms.sum()
+        out[k] = node_bound(planes, tables, tu[k], tv[k], ta[k], h, terms)[0]
     return out
 
 
@@ -135,21 +173,23 @@ def search_step(planes, tables, free, space, held, heap, shared_best, budget, pe
     """Resume the best-first search for at most `budget` expansions.
 
     heap: the pending nodes, (keys, nodes, size) as make_heap returns them. shared_best[0]:
-    the best leaf score any thread's search has found (read before each expansion, raised
+    the best leaf evidence any thread's search has found (read before each expansion, raised
     when this one finds better; a stale read only prunes less). Every node whose bound
     reaches keep_floor(best) is expanded, best first; the search is over when the top of
     the heap is below that. Children and leaves reaching the floor of `held` (`space` with a
     band as wide or wider) are kept in the heap and returned, so the search can resume with
     it (search.Resume). The caller prunes the leaves by the final threshold. Counts
     expansions per level into per_level.
-    Returns (expansions, done, leaves (m, 4): u, v, a, score, heap).
+    Returns (expansions, done, leaves (m, 5): u, v, a, optimistic score, evidence, heap).
     """
     keys, nodes, size = heap
-    leaves = np.empty((64, 4), np.int64)
+    leaves = np.empty((64, 5), np.int64)
     n_leaves = 0
     n_points = tables.du.shape[1]
     parent = np.empty(n_points, np.int64)
     parent_rest = np.zeros(n_points + 1, np.int64)     # parent_rest[i]: sum of parent[i:]
+    ev_parent = np.zeros(n_points, np.int64)           # the same from the evidence planes
+    ev_rest = np.zeros(n_points + 1, np.int64)
     best = shared_best[0]
     floor = keep_floor(space, best, n_points)
     hold = keep_floor(held, best, n_points)
@@ -166,30 +206,37 @@ def search_step(planes, tables, free, space, held, heap, shared_best, budget, pe
         _, h, u, v, a = heap_pop(keys, nodes, size)
         expanded += 1
         per_level[h] += 1
-        point_values(planes, tables, u, v, a, h, parent)
+        point_values(planes, tables, u, v, a, h, parent, 0)
         for i in range(n_points - 1, -1, -1):
             parent_rest[i] = parent_rest[i + 1] + parent[i]
+        if planes.evidence != 0:
+            point_values(planes, tables, u, v, a, h, ev_parent, planes.evidence)
+            for i in range(n_points - 1, -1, -1):
+                ev_rest[i] = ev_rest[i + 1] + ev_parent[i]
         for c in range(8):
             cu, cv, ca, searched = child_node(free, space, u, v, a, h, c)
             if not searched:
                 continue
-            cb = child_bound(planes, tables, cu, cv, ca, h - 1, parent, parent_rest, hold)
-            if h == 1:      # a leaf: its exact score
-                if cb > best:
-                    best = cb
+            cb, ev = child_bound(planes, tables, cu, cv, ca, h - 1, parent, parent_rest, ev_parent, ev_rest, hold)
+            if h == 1:      # a leaf: its exact scores (evidence <= optimistic: below hold, neither counts)
+                if cb < hold:
+                    continue
+                if ev > best:
+                    best = ev
                     floor = keep_floor(space, best, n_points)
                     hold = keep_floor(held, best, n_points)
-                    if cb > shared_best[0]:
-                        shared_best[0] = cb
+                    if ev > shared_best[0]:
+                        shared_best[0] = ev
                 if cb >= hold:
                     if n_leaves == leaves.shape[0]:
-                        grown = np.empty((2 * n_leaves, 4), np.int64)
+                        grown = np.empty((2 * n_leaves, 5), np.int64)
                         grown[:n_leaves] = leaves
                         leaves = grown
                     leaves[n_leaves, 0] = cu
                     leaves[n_leaves, 1] = cv
                     leaves[n_leaves, 2] = ca
                     leaves[n_leaves, 3] = cb
+                    leaves[n_leaves, 4] = ev
                     n_leaves += 1
             elif cb >= hold:
                 keys, nodes = heap_push(keys, nodes, size, heap_key(cb, h - 1), cu, cv, ca)
@@ -202,25 +249,25 @@ def dive(planes, tables, free, space, u, v, a, h):
     free block, in the search prior) with the highest bound. Returns the leaf's row (u,
     v, angle index, exact score), score -1 if no child qualified (not for a node on a
     free block in the prior: one of its children holds the same free cell). The search's
-    first incumbent, so that it holds a leaf before its first slice ends."""
+    first incumbent, so that it holds a leaf before its first slice ends. The leaf's row
+    is (u, v, angle index, optimistic score, evidence)."""
     terms = np.empty(tables.du.shape[1], np.int64)
     while h > 0:
-        best_bound, bu, bv, ba = np.int64(-1), u, v, a
+        best_bound, best_ev, bu, bv, ba = np.int64(-1), np.int64(-1), u, v, a
         for c in range(8):
             cu, cv, ca, searched = child_node(free, space, u, v, a, h, c)
             if not searched:
                 continue
-            point_values(planes, tables, cu, cv, ca, h - 1, terms)
-            bound = terms.sum()
+            bound, ev = node_bound(planes, tables, cu, cv, ca, h - 1, terms)
             if bound > best_bound:
-                best_bound, bu, bv, ba = bound, cu, cv, ca
+                best_bound, best_ev, bu, bv, ba = bound, ev, cu, cv, ca
         if best_bound < 0:
-            return np.array([u, v, a, -1], np.int64)
+            return np.array([u, v, a, -1, -1], np.int64)
         u, v, a, h = bu, bv, ba, h - 1
         if h == 0:
-            return np.array([u, v, a, best_bound], np.int64)
-    point_values(planes, tables, u, v, a, 0, terms)
-    return np.array([u, v, a, terms.sum()], np.int64)
+            return np.array([u, v, a, best_bound, best_ev], np.int64)
+    score, ev = node_bound(planes, tables, u, v, a, 0, terms)
+    return np.array([u, v, a, score, ev], np.int64)
 
 
 @njit(cache=True, nogil=True)
@@ -243,9 +290,9 @@ def warm_up() -> None:
     server pays it at start-up rather than in its first goal."""
     zeros = np.zeros(2, np.int64)
     widths = np.full(2, 4, np.int64)
-    planes = Planes(np.zeros(16, np.uint8), zeros, widths, 0, 4, 4)
+    planes = Planes(np.zeros(64, np.uint8), zeros, widths, 0, 4, 4, 32)
     du = np.zeros((3, 1), np.int32)
-    tables = ScanTables(np.zeros((2, 1), np.int64), du, du, np.array([0, 2], np.int64))
+    tables = ScanTables(np.zeros((2, 1), np.int64), du, du, np.array([0, 2], np.int64), 0)
     top = np.zeros((1, 4), np.int64)
     node_bounds(planes, tables, top[:, 0], top[:, 1], top[:, 2], 1)
     space = SearchSpace(2, 2, 2, 0.9, 0.5, 0.03, 0.0, 0.0, -1.0, 0.0, -1.0)

@@ -27,28 +27,27 @@ from typing import Callable, NamedTuple, Optional
 import numpy as np
 
 from ...map_io import OccupancyMap
-from ...outcome import Outcome
 from ...pixel_kernels import warm_up as warm_up_pixel_kernels
 from ...scan import ScanPoints, voxel_filter
 from ...search_region import SearchRegion
 from ...transform import Rigid2D
 from ..base import Candidate, Match, Matcher, MatchOptions, ProgressFn
+from .early_end import resume_rule, settled_check
 from .free_space import see_through_fractions
 from .grids import PrecomputationGridStack
 from .kernels import ScanTables, SearchSpace, node_bounds, offset_tables, region_mask
 from .kernels import warm_up as warm_up_search
 from .options import BranchAndBoundOptions
-from .refine import bin_maxima, landscape_covariance, refine
+from .peaks import PeakRefiner
+from .refine import refine
 from .refine import warm_up as warm_up_refine
 from .search import Resume, SearchRun, SearchStats, SettledFn, ThreadedSearch, search_threads, top_in_band
-from .verdict import REFINED_GAIN, explained_share, judge, keep_floor, needed_lead, unscored_could_be_confident
-
-
-class SettledJudgment(NamedTuple):
-    """settled_check's last judgment of the leaves kept so far."""
-    leaves: int        # how many leaves it judged
-    settled: bool      # they judge `poor match`, or `ambiguous` with a full list
-    fit: float         # the best field score among their hypotheses
+from .verdict import (
+    MAX_UNKNOWN_SHARE,
+    explained_share,
+    judge,
+    needed_lead,
+)
 
 
 class TreeSearch(NamedTuple):
@@ -58,6 +57,9 @@ class TreeSearch(NamedTuple):
     run: SearchRun
     stats: SearchStats
     stopped: str           # why the search stopped early ('' when it did not)
+    space: SearchSpace     # what it searched (the map, the headings, the prior)
+    tops: tuple            # its top nodes (u, v, a) and tables, for the search for unknown's rivals
+    deadline: float        # time.monotonic() by which the match must end
 
 
 SETTLED = ('the search ended once no place it had not scored could make the answer confident: the hypotheses are '
@@ -83,6 +85,7 @@ class BranchAndBoundMatcher(Matcher):
         self.distinct_angle = self.options.distinct_angle
         self.stack = PrecomputationGridStack(occupancy_map, self.options)
         self.searcher = ThreadedSearch(slice_expansions)
+        self.peaks = PeakRefiner(self.stack, occupancy_map, self.options)
         self._last_tops = None     # (scan key, its top nodes and tables): see tree_search
         # Called with each match's distinct peaks (their leaf scores), their refined fits and the
         # ranked candidates: what an experiment on the band or the refinement measures
@@ -117,7 +120,8 @@ class BranchAndBoundMatcher(Matcher):
             size = 2 ** h
             thetas.append((np.arange(0, n_angles, size) + (size - 1) / 2.0) * d0)
         du, dv = offset_tables(np.concatenate(thetas), pts[:, 0] / res, pts[:, 1] / res)   # (rows, points)
-        return ScanTables(self.stack.offsets[gid], du, dv, np.array(row_start, np.int64))
+        return ScanTables(self.stack.offsets[gid], du, dv, np.array(row_start, np.int64),
+                          int(MAX_UNKNOWN_SHARE * 255 * len(pts)))
 
     def bounds(self, level: int, tu, tv, ta, pts, d0) -> np.ndarray:
         """Bounds (level > 0) or exact scores (level 0) of nodes (tu, tv, ta), in [0, 1]."""
@@ -131,13 +135,46 @@ class BranchAndBoundMatcher(Matcher):
         if tree is None:
             return Match([])
         # 3. Peaks, refined, checked for free space, ranked.
-        leaves = tree.run.leaves
-        scores = leaves[:, 3] / (255.0 * len(tree.pts))
-        candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], scores, tree.pts, tree.d0, points)
+        candidates = self.refine_peaks(tree.run.leaves, tree.pts, tree.d0, points)
+        # 4. A confident answer on a map with unknown cells: the places the map cannot rule out.
+        if self.stack.has_unknown and candidates and not tree.stopped and not tree.run.settled and \
+                self.judge_exhaustive(candidates, tree.stats).success:
+            tree = self.unknown_rivals(tree, options)
+            candidates = self.refine_peaks(tree.run.leaves, tree.pts, tree.d0, points)
         if progress:
             progress(1.0, candidates[0].score if candidates else 0.0)
         settled = SETTLED if tree.run.settled else ''
         return Match(candidates, tree.stats, tree.stopped, settled)
+
+    def unknown_rivals(self, tree: 'TreeSearch', options: MatchOptions) -> 'TreeSearch':
+        """The search again, over the optimistic planes (unknown cells a beam can reach may
+        hide a wall, for at most MAX_UNKNOWN_SHARE of the scan: kernels), pruned from the
+        start by the best leaf's band: every place whose optimistic score reaches it, so
+        that a place whose walls the map lacks is never pruned for them and stays a rival
+        (verdict.rival_scores). Run only after a confident answer (any other is not made
+        confident by a rival) and within what is left of the match's node budget and time.
+        Returns the tree with both searches' leaves."""
+        first = tree.run
+        tu, tv, ta, tables = tree.tops
+        top = self.options.levels - 1
+        bounds = self.searcher.node_bounds(self.stack.planes, tables, tu, tv, ta, top)
+        evidence = int(first.leaves[:, 4].max())
+        space = tree.space
+        left = max(1, (options.max_nodes or self.options.max_nodes) - int(first.per_level.sum()))
+        start = time.perf_counter()
+        run = self.searcher.run(self.stack.planes, tables, self.stack.free, space,
+                                np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, left, None,
+                                tree.deadline, None, evidence, None)
+        expansions = int(first.per_level.sum() + run.per_level.sum())
+        stopped = '' if run.exact else (
+            f'stopped after {expansions} node expansions' if run.per_level.sum() >= left
+            else f'stopped at the {options.max_search_s:g} s search limit')
+        leaves = np.unique(np.concatenate([first.leaves, run.leaves]), axis=0)
+        stats = dataclasses.replace(tree.stats, exact=run.exact, leaves=len(leaves), expansions=expansions,
+                                    per_level=tuple((first.per_level + run.per_level).tolist()),
+                                    search_s=tree.stats.search_s + time.perf_counter() - start)
+        return tree._replace(run=first._replace(leaves=leaves, per_level=first.per_level + run.per_level,
+                                                exact=run.exact), stats=stats, stopped=stopped)
 
     def tree_stats(self, points: ScanPoints, options: MatchOptions) -> Optional[SearchStats]:
         """The statistics of a search within `options`' limits, with no refinement and no
@@ -179,7 +216,7 @@ class BranchAndBoundMatcher(Matcher):
             if len(tu) == 0:
                 return None
             tables = self.tables(pts, 2 * math.pi / n_angles, n_angles)
-            bounds = self.searcher.node_bounds(self.stack.planes, tables, tu, tv, ta, top)
+            bounds = self.searcher.node_bounds(self.stack.evidence_planes, tables, tu, tv, ta, top)
             # one scan's top nodes and tables kept: a map set searches each map several times
             # with one scan (core.map_set), and they take a few ms to build on a large map
             self._last_tops = (key, (n_angles, space, tu, tv, ta, tables, bounds))
@@ -187,12 +224,12 @@ class BranchAndBoundMatcher(Matcher):
         # 2. Branch and bound down to the band below the best leaf (verdict.searched_keep).
         search_start = time.perf_counter()
         resume = self.resume_rule(space, pts, d0, points)
-        run = self.searcher.run(self.stack.planes, tables, self.stack.free, space,
+        run = self.searcher.run(self.stack.evidence_planes, tables, self.stack.free, space,
                                 np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, max_nodes, progress,
                                 deadline, self.settled_check(pts, d0, points),
                                 int(options.incumbent * 255 * len(pts)), resume)
         search_s = time.perf_counter() - search_start
-        scores = run.leaves[:, 3] / (255.0 * len(pts))
+        scores = run.leaves[:, 4] / (255.0 * len(pts))      # evidence
         expansions = int(run.per_level.sum())
         stopped = '' if run.exact or run.settled else (
             f'stopped after {expansions} node expansions' if expansions >= max_nodes
@@ -204,70 +241,15 @@ class BranchAndBoundMatcher(Matcher):
                             band_allowance=1.0 if run.resumed else opt.band_allowance,
                             top_in_band=top_in_band(bounds, resume.space if run.resumed else space, run.leaves,
                                                     len(pts)))
-        return TreeSearch(pts, d0, run, stats, stopped)
+        return TreeSearch(pts, d0, run, stats, stopped, space, (tu, tv, ta, tables), deadline)
 
     def resume_rule(self, space: SearchSpace, pts, d0, points: ScanPoints) -> Optional[Resume]:
-        """With a narrow band (band_allowance < 1): the search resumes with the whole
-        keep_ratio band unless the narrow band's answer is `localized` and no place below
-        it could come within the lead: such a place's leaf scores below the band's floor,
-        its refined fit at most REFINED_GAIN above that. A resumed search ends exactly as
-        one with the whole band from the start (the test_bnb_resume suite)."""
-        if self.options.band_allowance >= 1.0:
-            return None
-        norm = 255.0 * len(pts)
-
-        def needed(leaves: np.ndarray) -> bool:
-            if len(leaves) == 0:
-                return True
-            candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, 3] / norm, pts, d0,
-                                           points)
-            if not judge(candidates, self.options).success:
-                return True
-            best = candidates[0]
-            unseen = keep_floor(space, int(leaves[:, 3].max()), len(pts)) / norm + REFINED_GAIN
-            lead = needed_lead(explained_share(best.score), self.options)
-            return min(best.score, best.explained) * (1.0 - lead) < unseen
-        return Resume(space._replace(band_allowance=1.0), needed)
+        """See early_end.resume_rule."""
+        return resume_rule(self.refine_peaks, self.options, space, pts, d0, points)
 
     def settled_check(self, pts, d0, points: ScanPoints) -> Optional[SettledFn]:
-        """The search's early end (search.ThreadedSearch.run's `settled`), True once:
-        - the best leaf is known (no pending node bounds above it);
-        - no place it has not scored could be judged confident: such a place's leaf scores
-          at most the highest pending bound, its refined score at most that plus
-          settle_slack (verdict.unscored_could_be_confident);
-        - the hypotheses of exactly the leaves kept so far (what match then returns) are
-          judged `poor match`, or `ambiguous` with a full list of hypotheses (resolving by
-          motion follows an ambiguous answer's list: a shorter one could miss the true place).
-        The rest of the band could still add a rival or push a listed one out of a full
-        list - change the hypotheses and the confidence number - but not make a place it
-        has not scored a confident answer. Refining and judging the leaves costs up to ~20
-        ms, a slice's work: only done when the best leaf, refined at most settle_slack
-        higher, could end the search, and when the leaves grew by a fifth since or the
-        last judgment would now end it. Opt-in (settle_slack < 1): on the benchmark it put a
-        worse place first, the true one not yet found, on one ambiguous 60 deg view."""
-        opt = self.options
-        if opt.settle_slack >= 1.0:
-            return None
-        norm = 255.0 * len(pts)
-        last = SettledJudgment(leaves=-1, settled=False, fit=1.0)
-
-        def settled(leaves: np.ndarray, top: int) -> bool:
-            nonlocal last
-            bound = top / norm + opt.settle_slack
-            if len(leaves) == 0 or top > leaves[:, 3].max() or \
-                    unscored_could_be_confident(bound, leaves[:, 3].max() / norm + opt.settle_slack, opt):
-                return False
-            would_end = last.settled and not unscored_could_be_confident(bound, last.fit, opt)
-            if len(leaves) != last.leaves and (len(leaves) > 1.2 * last.leaves or would_end):
-                candidates = self.refine_peaks(leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, 3] / norm, pts,
-                                               d0, points)
-                outcome = judge(candidates, opt).outcome if candidates else Outcome.NO_MATCH
-                last = SettledJudgment(len(leaves), outcome == Outcome.POOR_MATCH or (
-                    outcome == Outcome.AMBIGUOUS and len(candidates) >= opt.hypotheses),
-                    max((c.explained for c in candidates), default=1.0))
-            return len(leaves) == last.leaves and last.settled and \
-                not unscored_could_be_confident(bound, last.fit, opt)
-        return settled
+        """See early_end.settled_check."""
+        return settled_check(self.refine_peaks, self.options, pts, d0, points)
 
     def fit_at(self, points: ScanPoints, laser_pose: Rigid2D) -> tuple[float, float, Rigid2D]:
         """How well the map explains the scan at a laser pose, refined within about a cell
@@ -317,29 +299,9 @@ class BranchAndBoundMatcher(Matcher):
         return SearchSpace(self.map.width, self.map.height, n_angles, opt.keep_ratio, opt.min_confidence,
                            opt.band_allowance, u, v, r, a, w)
 
-    def refine_peaks(self, tu, tv, ta, scores, pts, d0, points: ScanPoints) -> list[Candidate]:
-        """The distinct hypotheses among the leaves (decided here, once, in metres: `distinct`
-        on the best leaf of each bin half as wide as distinct_m and distinct_angle - two
-        leaves in one bin are never two hypotheses), refined, ranked by field score x (1 -
-        see-through share); the best carries the landscape covariance. (7 arguments: the
-        leaves as the compiled search returns them, columns apart, the points and the angle step.)"""
-        opt = self.options
-        frame = self.map.frame
-        leaves = [Candidate(frame.pixel_pose_to_world(float(tu[i]), float(tv[i]), float(ta[i] * d0)),
-                            float(scores[i]))
-                  for i in bin_maxima(tu, tv, ta, scores, d0, self.map.height, opt.distinct_m / self.map.resolution / 2,
-                                      opt.distinct_angle / 2)]
-        peaks = self.distinct(leaves)
-        starts = [frame.world_pose_to_pixel(c.laser_pose) for c in peaks]
-        refined = np.array([refine(self.stack.field, u, v, yaw, pts, self.map.resolution)
-                            for u, v, yaw in starts]).reshape(-1, 4)
-        through = see_through_fractions(self.stack.occupied, refined[:, :3], points, self.map.resolution, opt)
-        rank = refined[:, 3] * (1.0 - through)
-        order = np.argsort(-rank, kind='stable')
-        out = [Candidate(frame.pixel_pose_to_world(*refined[i, :3]), float(rank[i]), explained=float(refined[i, 3]),
-                         see_through=float(through[i])) for i in order]
-        if out:
-            out[0].covariance = landscape_covariance(self.stack.field, frame, *refined[order[0], :3], pts)
+    def refine_peaks(self, leaves: np.ndarray, pts, d0, points: ScanPoints) -> list[Candidate]:
+        """The distinct hypotheses among the leaves (peaks.PeakRefiner), handed to on_peaks."""
+        peaks, fits, out = self.peaks.refine(leaves, pts, d0, points)
         if self.on_peaks is not None:
-            self.on_peaks([c.score for c in peaks], [float(f) for f in refined[:, 3]], out)
+            self.on_peaks(peaks, fits, out)
         return out

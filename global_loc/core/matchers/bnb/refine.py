@@ -19,26 +19,46 @@ from ...pixel_kernels import image_point
 FIELD_UNIT = 1.0 / 255.0
 
 
+@njit(cache=True, nogil=True, inline='always')
+def bilinear(field, x, y):
+    """The field (uint8, in FIELD_UNIT) bilinearly interpolated at pixel (x, y), zero outside it."""
+    height, width = field.shape
+    x0, y0 = math.floor(x), math.floor(y)
+    fx, fy = x - x0, y - y0
+    ix, iy = int(x0), int(y0)
+    total = 0.0
+    for dy in range(2):
+        for dx in range(2):
+            xx, yy = ix + dx, iy + dy
+            if 0 <= xx < width and 0 <= yy < height:
+                total += field[yy, xx] * (fx if dx else 1.0 - fx) * (fy if dy else 1.0 - fy)
+    return total * FIELD_UNIT
+
+
 @njit(cache=True, nogil=True)
 def field_means(field, poses, px, py):
     """Per pose (u, v, yaw): the mean of the field (uint8, in FIELD_UNIT), bilinearly
     interpolated (zero outside the map), at the points (px, py, laser frame, in cells)."""
-    height, width = field.shape
     out = np.empty(poses.shape[0])
     for k in range(poses.shape[0]):
         c, s = math.cos(poses[k, 2]), math.sin(poses[k, 2])
         total = 0.0
         for i in range(len(px)):
             x, y = image_point(poses[k, 0], poses[k, 1], c, s, px[i], py[i])
-            x0, y0 = math.floor(x), math.floor(y)
-            fx, fy = x - x0, y - y0
-            ix, iy = int(x0), int(y0)
-            for dy in range(2):
-                for dx in range(2):
-                    xx, yy = ix + dx, iy + dy
-                    if 0 <= xx < width and 0 <= yy < height:
-                        total += field[yy, xx] * (fx if dx else 1.0 - fx) * (fy if dy else 1.0 - fy)
-        out[k] = total * FIELD_UNIT / max(len(px), 1)
+            total += bilinear(field, x, y)
+        out[k] = total / max(len(px), 1)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def field_samples(field, poses, px, py):
+    """(poses, points): the field at each point, as field_means averages it."""
+    out = np.empty((poses.shape[0], len(px)))
+    for k in range(poses.shape[0]):
+        c, s = math.cos(poses[k, 2]), math.sin(poses[k, 2])
+        for i in range(len(px)):
+            x, y = image_point(poses[k, 0], poses[k, 1], c, s, px[i], py[i])
+            out[k, i] = bilinear(field, x, y)
     return out
 
 
@@ -107,3 +127,4 @@ def landscape_covariance(field: np.ndarray, frame: GridFrame, u: float, v: float
 def warm_up() -> None:
     # the layout the matcher passes: a strided view of the first plane (see grids)
     field_means(np.zeros((4, 4), np.uint8)[1:3, 1:3], np.zeros((1, 3)), np.zeros(1), np.zeros(1))
+    field_samples(np.zeros((4, 4), np.uint8)[1:3, 1:3], np.zeros((1, 3)), np.zeros(1), np.zeros(1))

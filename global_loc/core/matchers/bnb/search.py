@@ -60,7 +60,8 @@ class Resume(NamedTuple):
 
 class SearchRun(NamedTuple):
     """What ThreadedSearch.run returns."""
-    leaves: np.ndarray       # rows u, v, angle index, raw score: the leaves in the best's band, in pose order
+    leaves: np.ndarray       # rows u, v, angle index, raw optimistic score, raw evidence: the leaves whose
+                             # optimistic score reaches the band of the best evidence, in pose order
     per_level: np.ndarray    # expansions per level
     exact: bool              # the whole band was searched
     settled: bool            # `settled` ended it: the band not all searched, the answer not to become confident
@@ -123,7 +124,7 @@ class ThreadedSearch:
         threads = search_threads()
         heaps, found = start(planes, tables, free, space, top_nodes, top_level, threads)
         shared_best = np.zeros(PAD, np.int64)
-        shared_best[0] = max(found[0][:, 3].max(initial=0), incumbent)
+        shared_best[0] = max(found[0][:, 4].max(initial=0), incumbent)
         per_level = [np.zeros(max(top_level + 1, PAD), np.int64) for _ in heaps]   # PAD: see kernels
         expanded, done = 0, [False] * threads
         held = resume.space if resume is not None else space
@@ -171,6 +172,7 @@ def start(planes: Planes, tables: ScanTables, free: FreeBlocks, space: SearchSpa
     order = np.argsort(-top_nodes[:, 3], kind='stable')
     heaps = [make_heap(top_nodes[order[k::threads]], top_level) for k in range(threads)]
     dived = np.stack([dive(planes, tables, free, space, *top_nodes[i, :3], top_level) for i in order[:threads]])
+    # (rows u, v, a, optimistic, evidence; -1 where no child qualified)
     return heaps, [dived[dived[:, 3] >= 0]]
 
 
@@ -185,11 +187,12 @@ def share_work(heaps: list, done: list[bool]) -> None:
 
 
 def kept_leaves(found: list[np.ndarray], space: SearchSpace, best: int, n_points: int) -> np.ndarray:
-    """The leaves found (lists of rows u, v, a, raw score) that reach the band of the best
-    (keep_floor), once each, in pose order - not the order the threads found them: equal
+    """The leaves found (lists of rows u, v, a, raw optimistic score, raw evidence) whose
+    optimistic score reaches the band of the best evidence (keep_floor), once each, in
+    pose order - not the order the threads found them: equal
     scores then pick the same peaks whatever the threads (the search may find a dive's
     leaf again)."""
-    leaves = np.concatenate(found) if found else np.empty((0, 4), np.int64)
+    leaves = np.concatenate(found) if found else np.empty((0, 5), np.int64)
     leaves = leaves[leaves[:, 3] >= keep_floor(space, best, n_points)]
     _, first = np.unique((leaves[:, 0] * space.map_h + leaves[:, 1]) * space.n_angles + leaves[:, 2],
                          return_index=True)
@@ -197,9 +200,9 @@ def kept_leaves(found: list[np.ndarray], space: SearchSpace, best: int, n_points
 
 
 def top_in_band(bounds: np.ndarray, space: SearchSpace, leaves: np.ndarray, n_points: int) -> int:
-    """How many top nodes (their raw bounds) reach the band of the best of `leaves` (rows u,
-    v, a, raw score) on n_points points: nodes an exhaustive search has to expand, so a
+    """How many top nodes (their raw bounds) reach the band of the best evidence of `leaves`
+    (search_step's rows) on n_points points: nodes an exhaustive search has to expand, so a
     lower limit on the expansions it needs (on a large building most top bounds are near a
     full fit)."""
-    best = int(leaves[:, 3].max(initial=0))
+    best = int(leaves[:, 4].max(initial=0))
     return int(np.count_nonzero(bounds >= keep_floor(space, best, n_points)))

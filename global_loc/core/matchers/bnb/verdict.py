@@ -61,6 +61,35 @@ REFINED_GAIN = 0.05
 LEAD_TOLERANCE = 1e-9
 
 
+# A place is judged by what the map cannot rule out (its optimistic score: a return on, or
+# near, an unknown cell a beam can reach counts as possibly explained), but at most this
+# share of the scan is credited that way: without a cap a free speck in unknown, or the
+# map's ragged edge, would fit any scan fully and no answer could ever be confident; with
+# it, a place must be made of what the map says for the rest. The search bounds the same
+# capped score (kernels: the two scores), so it never prunes such a place.
+MAX_UNKNOWN_SHARE = 1.0 / 3.0
+
+# Headings this close to a half turn apart make two places each other's twin (a building
+# symmetric under a half turn: the scan fits both)
+TWIN_TOLERANCE = math.radians(20.0)
+
+
+def rival_scores(c: Candidate) -> tuple[float, float]:
+    """(ranking score, field score) of another place as a rival of the best: what the map
+    cannot rule out there (its optimistic score, capped at MAX_UNKNOWN_SHARE above its
+    evidence when refined: matcher.refine_peaks) - returns on unknown cells neither explain
+    nor contradict it."""
+    if c.optimistic is None:
+        return c.score, c.explained
+    return max(c.score, c.optimistic * (1.0 - (c.see_through or 0.0))), max(c.explained, c.optimistic)
+
+
+def is_twin(best: Candidate, other: Candidate) -> bool:
+    """Whether `other` is `best` turned by about a half turn (TWIN_TOLERANCE)."""
+    turn = abs(math.remainder(other.laser_pose.yaw - best.laser_pose.yaw, 2 * math.pi))
+    return abs(turn - math.pi) <= TWIN_TOLERANCE
+
+
 def unscored_could_be_confident(fit_bound: float, best_fit: float, options: BranchAndBoundOptions) -> bool:
     """Whether a place the search has not scored yet, whose field score (refined) is at
     most fit_bound, could be judged localized against hypotheses whose best field score
@@ -84,7 +113,10 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
     counts an end point near a wall as explained even when its beam crosses another
     wall, which the map contradicts, so the best's share is its ranking score's). The
     margin is the smaller of the ranking score's and the field score's: the free-space
-    check may reorder places but never vouches for one alone. `localized` needs confidence >=
+    check may reorder places but never vouches for one alone. Another place is measured by
+    what the map cannot rule out (rival_scores): returns on unknown cells count for it,
+    not against it, for up to MAX_UNKNOWN_SHARE of the scan - a place whose walls were
+    never mapped stays a rival of its fully mapped twin. `localized` needs confidence >=
     min_confidence; otherwise `poor match` when the map explains too little of the scan,
     else `ambiguous`.
 
@@ -96,14 +128,15 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
     if not candidates:
         return Verdict(Outcome.NO_MATCH, 0.0, 'bnb found no pose on free space')
     best, others = candidates[0], candidates[1:]
-    fit = [c.explained for c in candidates]
+    ranks, fits = zip(*[rival_scores(c) for c in others], strict=True) if others else ((), ())
+    fit = [best.explained, *fits]
     explained = explained_share(best.score)
     need = needed_lead(explained, opt)
     capped = searched_keep(fit[0], opt.keep_ratio, opt.min_confidence, opt.band_allowance) > opt.keep_ratio
     # No other peak found means none scored above `unseen` x best (in either score): the
     # band searched follows the leaves' field score, so it may be narrower than `need`
     unseen = 1.0 - needed_lead(explained_share(fit[0]), opt) if capped else opt.keep_ratio
-    second = others[0].score if others else unseen * best.score
+    second = max(ranks) if others else unseen * best.score
     rival = max(fit[1:] + [unseen * max(fit)])
     rank_margin = (best.score - second) / best.score if best.score > 0 else 0.0
     fit_margin = (fit[0] - rival) / fit[0] if fit[0] > 0 else 0.0
@@ -120,7 +153,26 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
             if best.see_through else ''
         return Verdict(Outcome.POOR_MATCH, conf, f'poor match: the map explains about {100 * best.score:.0f}% of the '
                                                  f'scan{crossing}')
-    if fit_margin < 0 and others:
+    return ambiguous_verdict(best, others, ranks, fit[0], need, margin, conf)
+
+
+def ambiguous_verdict(best: Candidate, others: list[Candidate], ranks, best_fit: float, need: float, margin: float,
+                      conf: float) -> Verdict:
+    """judge's `ambiguous`, saying why: a rival only for what the map does not say, one
+    whose beams cross walls, or places within the lead (`ranks`: the others' rival
+    ranking scores); the closest named when it is the best's twin (a half turn). (7
+    arguments: judge's figures, passed on rather than computed twice.)"""
+    closest = others[int(np.argmax(ranks))] if others else None
+    twin = '; the closest is the best turned by about 180 deg (a symmetric place: its twin)' \
+        if closest is not None and is_twin(best, closest) else ''
+    # a rival only for what the map does not say (its evidence alone lies beyond the lead)
+    if closest is not None and min(closest.score / best.score, closest.explained / best_fit) < 1.0 - need <= \
+            min(rival_scores(closest)[0] / best.score, rival_scores(closest)[1] / best_fit):
+        return Verdict(Outcome.AMBIGUOUS, conf,
+                       f'ambiguous: another place, {100 * (closest.unknown or 0.0):.0f}% of its returns on cells the '
+                       f'map does not know, could explain the scan as well as the best (what the map does say there '
+                       f'agrees){twin}; see the hypotheses')
+    if others and max(c.explained for c in others) > best_fit:
         rival_c = max(others, key=lambda c: c.explained)
         return Verdict(Outcome.AMBIGUOUS, conf,
                        f'ambiguous: another place explains the scan as well or better, but '
@@ -128,7 +180,7 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
                        f'({100 * (best.see_through or 0.0):.0f}% for the best); see the hypotheses')
     # the rivals: every other place within the lead a confident answer needs at this fit
     # (not only those within twice the margin: exact twins differ by rounding, ~1e-15)
-    close = sum(c.score >= best.score * (1.0 - need) for c in others)
+    close = sum(r >= best.score * (1.0 - need) for r in ranks)
     return Verdict(Outcome.AMBIGUOUS, conf, f'ambiguous: {max(close, 1)} other place(s) within {100 * need:.0f}% '
-                                            f'of the best (the closest {100 * max(margin, 0.0):.1f}% behind); '
+                                            f'of the best (the closest {100 * max(margin, 0.0):.1f}% behind{twin}); '
                                             f'see the hypotheses')

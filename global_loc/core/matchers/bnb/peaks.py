@@ -1,0 +1,83 @@
+"""bnb's hypotheses from the search's leaves: the distinct peaks, refined on the
+likelihood field, checked for free space and for what the map cannot rule out (unknown
+cells), ranked; the best with its covariance."""
+from __future__ import annotations
+
+import numpy as np
+
+from ...map_io import OccupancyMap
+from ...scan import ScanPoints
+from ..base import Candidate, apart, distinct
+from .free_space import clear_returns, on_unknown, see_through_fractions
+from .grids import PrecomputationGridStack
+from .options import BranchAndBoundOptions
+from .refine import bin_maxima, field_samples, landscape_covariance, refine
+from .verdict import MAX_UNKNOWN_SHARE
+
+
+class PeakRefiner:
+    """Per map: turns a search's leaves into ranked hypotheses."""
+
+    def __init__(self, stack: PrecomputationGridStack, occupancy_map: OccupancyMap, options: BranchAndBoundOptions):
+        self.stack = stack
+        self.map = occupancy_map
+        self.options = options
+
+    def leaf_peaks(self, leaves: np.ndarray, column: int, d0: float, norm: float) -> list[Candidate]:
+        """The distinct places among the leaves (search_step's rows) by one of their scores
+        (column 3: optimistic, 4: evidence): `distinct` on the best leaf of each bin half as
+        wide as distinct_m and distinct_angle - two leaves in one bin are never two places."""
+        opt = self.options
+        frame = self.map.frame
+        tu, tv, ta, scores = leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, column] / norm
+        return distinct([Candidate(frame.pixel_pose_to_world(float(tu[i]), float(tv[i]), float(ta[i] * d0)),
+                                        float(scores[i]))
+                              for i in bin_maxima(tu, tv, ta, scores, d0, self.map.height,
+                                                  opt.distinct_m / self.map.resolution / 2, opt.distinct_angle / 2)],
+                        opt.hypotheses, opt.distinct_m, opt.distinct_angle)
+
+    def refine(self, leaves: np.ndarray, pts, d0, points: ScanPoints) -> tuple[list, list, list[Candidate]]:
+        """The distinct hypotheses among the leaves (search_step's rows; decided here, once,
+        in metres): the best places by evidence, and - where unknown cells lift some
+        leaves' optimistic scores - the best by optimistic score too, each refined on the
+        evidence field and ranked by field score x (1 - see-through share), with its
+        optimistic score at the refined pose (never below its leaf's: a rival the map
+            cannot rule out, verdict.judge) and its share of points on unknown cells with
+        nothing mapped in the way. At most
+        `hypotheses` of them: the best-ranked, and the strongest such rival. The best
+        carries the landscape covariance. Returns (the peaks' leaf scores, their refined fits,
+        the hypotheses)."""
+        opt = self.options
+        frame = self.map.frame
+        norm = 255.0 * len(pts)
+        peaks = self.leaf_peaks(leaves, 4, d0, norm)
+        if len(leaves) and (leaves[:, 3] > leaves[:, 4]).any():
+            peaks += [c for c in self.leaf_peaks(leaves, 3, d0, norm)
+                      if all(apart(c, p, opt.distinct_m, opt.distinct_angle) for p in peaks)]
+        starts = [frame.world_pose_to_pixel(c.laser_pose) for c in peaks]
+        refined = np.array([refine(self.stack.field, u, v, yaw, pts, self.map.resolution)
+                            for u, v, yaw in starts]).reshape(-1, 4)
+        res = self.map.resolution
+        # what the map cannot rule out: a return whose beam reaches it through free and
+        # unknown cells may have hit a wall the map lacks (the optimistic field there)
+        clear = clear_returns(self.stack.occupied, refined[:, :3], pts, res, opt)
+        px, py = pts[:, 0] / res, pts[:, 1] / res
+        optimistic = np.where(clear, field_samples(self.stack.optimistic, refined[:, :3], px, py),
+                              field_samples(self.stack.field, refined[:, :3], px, py)).mean(axis=1) \
+            if len(refined) else np.zeros(0)
+        optimistic = np.clip(optimistic, refined[:, 3], refined[:, 3] + MAX_UNKNOWN_SHARE)    # as the search credits it
+        unknown = (clear & on_unknown(self.stack.occupancy, refined[:, :3], pts, res)).mean(axis=1) \
+            if len(refined) else np.zeros(0)
+        through = see_through_fractions(self.stack.occupied, refined[:, :3], points, res, opt)
+        rank = refined[:, 3] * (1.0 - through)
+        order = list(np.argsort(-rank, kind='stable'))
+        if len(order) > opt.hypotheses:
+            rival = max(order[1:], key=lambda i: optimistic[i] * (1 - through[i]))
+            order = order[:opt.hypotheses] if rival in order[:opt.hypotheses] else \
+                order[:opt.hypotheses - 1] + [rival]
+        out = [Candidate(frame.pixel_pose_to_world(*refined[i, :3]), float(rank[i]), explained=float(refined[i, 3]),
+                         see_through=float(through[i]), optimistic=float(optimistic[i]), unknown=float(unknown[i]))
+               for i in order]
+        if out:
+            out[0].covariance = landscape_covariance(self.stack.field, frame, *refined[order[0], :3], pts)
+        return [c.score for c in peaks], [float(f) for f in refined[:, 3]], out
