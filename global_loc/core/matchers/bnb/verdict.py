@@ -172,12 +172,14 @@ def ambiguous_verdict(best: Candidate, others: list[Candidate], ranks, best_fit:
                        f'ambiguous: another place, {100 * (closest.unknown or 0.0):.0f}% of its returns on cells the '
                        f'map does not know, could explain the scan as well as the best (what the map does say there '
                        f'agrees){twin}; see the hypotheses')
-    if others and max(c.explained for c in others) > best_fit:
-        rival_c = max(others, key=lambda c: c.explained)
+    rival_c = max(others, key=lambda c: c.explained) if others else None
+    # a rival ranked behind only for its beams through walls (an exact twin ties: the next message)
+    if rival_c is not None and rival_c.explained > best_fit and \
+            (rival_c.see_through or 0.0) > (best.see_through or 0.0):
         return Verdict(Outcome.AMBIGUOUS, conf,
                        f'ambiguous: another place explains the scan as well or better, but '
                        f'{100 * (rival_c.see_through or 0.0):.0f}% of its beams would pass through walls '
-                       f'({100 * (best.see_through or 0.0):.0f}% for the best); see the hypotheses')
+                       f'({100 * (best.see_through or 0.0):.0f}% for the best){twin}; see the hypotheses')
     # the rivals: every other place within the lead a confident answer needs at this fit
     # (not only those within twice the margin: exact twins differ by rounding, ~1e-15)
     close = sum(r >= best.score * (1.0 - need) for r in ranks)
