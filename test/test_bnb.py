@@ -253,3 +253,28 @@ def test_a_search_stopped_before_any_leaf_still_returns_its_best_leaf_as_a_hypot
     assert result.outcome == Outcome.SEARCH_INCOMPLETE and not result.success
     assert 'best of what was explored, see the hypotheses' in result.message
     assert result.hypotheses and result.pose is not None and result.search_stats.expansions <= 6
+
+
+def test_the_covariance_of_a_real_log_like_scan_covers_its_error(office_map):
+    """Scans with 2 cm noise against a map whose right half was drawn a cell off (a map
+    built from another run): the truth lies inside the published 2 sigma ellipsoid (chi-square,
+    3 degrees of freedom) on at least 80% of the confident answers and inside 1 sigma on at
+    least half - the covariance grows with the residuals at the answer (refine.residual_spread),
+    where a landscape of independent points alone held it to the map's cells (~1.4 cm)."""
+    from global_loc.core.map_io import make_map
+    from global_loc.sim.raycast import sample_free_poses
+    grid = office_map.occupancy.copy()
+    half = grid.shape[1] // 2
+    grid[:, half:] = np.roll(np.roll(grid[:, half:], 1, axis=1), 1, axis=0)
+    shifted = Localizer(make_map(grid, office_map.resolution, office_map.origin, 'office, right half a cell off'))
+    rng = np.random.default_rng(7)
+    d2 = []
+    for pose in sample_free_poses(office_map, 12, rng, clearance=0.5):
+        result = shifted.localize(simulate_scan(office_map, pose, 270, 541, 20.0, noise_std=0.02, dropout=0.02,
+                                                rng=rng))
+        if result.success:
+            e = np.array([result.pose.x - pose.x, result.pose.y - pose.y,
+                          math.remainder(result.pose.yaw - pose.yaw, 2 * math.pi)])
+            d2.append(float(e @ np.linalg.solve(result.covariance, e)))
+    assert len(d2) >= 8, d2
+    assert np.mean(np.array(d2) <= 8.02) >= 0.8 and np.mean(np.array(d2) <= 3.53) >= 0.5, d2

@@ -13,6 +13,7 @@ import numpy as np  # noqa: E402
 from ..core.scan import scan_to_points  # noqa: E402
 from ..core.transform import Rigid2D  # noqa: E402
 from ..offline.plot import plot_localization  # noqa: E402
+from .calibration import calibration_section  # noqa: E402
 from .changed import changed_section  # noqa: E402
 from .follow import follow_section  # noqa: E402
 from .maps import maps_section  # noqa: E402
@@ -162,6 +163,8 @@ def write_report(rows, meta, out, maps, trials) -> None:
             sections.append(section(meta[suite]))
     if meta.get('scaling'):
         sections.append(scaling_section(meta['scaling'], rows, out))
+    if any(r.get('cov_d2') is not None for r in rows):
+        sections.append(calibration_section(rows))
     # The report opens with its table (the summary, or the one suite's own), the command that
     # made it and what it means; the machine and the details follow.
     lead = summary_section(rows + meta.get('scaling', []), RESULTS if committed else None) or \

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..core.localizer import Localizer
 from ..core.outcome import Outcome
 from ..core.scan import ScanError
@@ -61,7 +63,23 @@ def run_job(job):
         row.update(estimate=[round(v, 4) for v in res.pose.as_tuple()], err_xy=round(err[0], 4),
                    err_yaw_deg=round(err[1], 3), ok=pose_correct(res.pose, trial.truth),
                    ok_loose=pose_correct(res.pose, trial.truth, 0.5, 10.0))
+        row.update(covariance_rows(res.pose, res.covariance, trial.truth))
     return row
+
+
+def covariance_rows(estimate, covariance, truth) -> dict:
+    """The published covariance against the error (the calibration table, bench/calibration.py):
+    its standard deviations and the error's squared Mahalanobis distance (x, y, yaw)."""
+    cov = np.asarray(covariance, dtype=float)
+    error = np.array([estimate.x - truth.x, estimate.y - truth.y,
+                      math.remainder(estimate.yaw - truth.yaw, 2 * math.pi)])
+    try:
+        d2 = float(error @ np.linalg.solve(cov, error))
+    except np.linalg.LinAlgError:
+        d2 = math.inf
+    return {'sigma_x': round(math.sqrt(max(cov[0, 0], 0.0)), 5), 'sigma_y': round(math.sqrt(max(cov[1, 1], 0.0)), 5),
+            'sigma_yaw_deg': round(math.degrees(math.sqrt(max(cov[2, 2], 0.0))), 4),
+            'err_x': round(abs(error[0]), 5), 'cov_d2': round(d2, 4) if math.isfinite(d2) else None}
 
 
 def worker_init(maps, threads):

@@ -79,5 +79,6 @@ class PeakRefiner:
                          see_through=float(through[i]), optimistic=float(optimistic[i]), unknown=float(unknown[i]))
                for i in order]
         if out:
-            out[0].covariance = landscape_covariance(self.stack.field, frame, *refined[order[0], :3], pts)
+            out[0].covariance = landscape_covariance(self.stack.field, frame, *refined[order[0], :3], pts,
+                                                     opt.sigma_cells)
         return [c.score for c in peaks], [float(f) for f in refined[:, 3]], out

@@ -103,12 +103,18 @@ def refine(field: np.ndarray, u: float, v: float, yaw: float, pts: np.ndarray, r
 
 
 def landscape_covariance(field: np.ndarray, frame: GridFrame, u: float, v: float, yaw: float, pts: np.ndarray,
-                         half: int = 3) -> np.ndarray:
-    """(x, y, yaw) covariance in the world frame from the score landscape around a peak:
-    scores on a (2 half + 1)^3 grid of cell and one-cell-at-max-range steps, weighted as
-    likelihoods (s / s_max)^N of N independent points, plus the search's own resolution
-    (a uniform cell and angle step: step^2 / 12). (7 arguments: a field, its frame, the peak's
-    pixel pose u, v, yaw as the refinement gives it, the points and the grid's half width.)"""
+                         sigma_cells: float, half: int = 3) -> np.ndarray:
+    """(x, y, yaw) covariance in the world frame: the score landscape around a peak plus
+    the disagreement of the scan and the map at it (residual_spread).
+
+    The landscape: scores on a (2 half + 1)^3 grid of cell and one-cell-at-max-range steps,
+    weighted as likelihoods (s / s_max)^N of N independent points - the shape of the
+    answer's uncertainty along a corridor or round a pillar. Near a good fit it is
+    narrower than a cell: what remains is not the points' independent noise but what they
+    share, the map drawn at its resolution and registered from another run, so the
+    residuals at the peak say how far the pose may be off (residual_spread). (8 arguments:
+    a field, its frame, the peak's pixel pose u, v, yaw as the refinement gives it, the
+    points, the field's sigma in cells and the grid's half width.)"""
     res = frame.resolution
     d_yaw = one_cell_angle(pts, res)
     steps = np.arange(-half, half + 1, dtype=float)
@@ -120,8 +126,29 @@ def landscape_covariance(field: np.ndarray, frame: GridFrame, u: float, v: float
     offsets = np.stack([*frame.pixel_steps_to_grid(du, dv), da], axis=1)
     mean = w @ offsets
     cov = (offsets - mean).T @ ((offsets - mean) * w[:, None])
-    cov += np.diag([res ** 2 / 12, res ** 2 / 12, d_yaw ** 2 / 12])
+    spread, reach = residual_spread(field, u, v, yaw, pts, res, sigma_cells)
+    # a shift of length d: d^2 / 2 on each axis; a turn moving the points by d at their range
+    cov += np.diag([spread * res ** 2 / 2, spread * res ** 2 / 2, spread / reach ** 2])
     return frame.covariance_to_world(cov)
+
+
+def residual_spread(field: np.ndarray, u: float, v: float, yaw: float, pts: np.ndarray, resolution: float,
+                    sigma_cells: float) -> tuple[float, float]:
+    """(mean squared residual, RMS range) in cells of the points the map explains at the
+    pose (within 3 sigma of a wall: the field exp(-d^2 / 2 sigma^2) read back as d). A scan
+    and a map that disagree by d at every wall - the map's cells (at least a uniform cell's
+    1/12), a map built from another run registered a few cm differently, the scan's noise
+    - hold the pose only to about d: a shift of d, or a turn moving the points by d at
+    their range, fits about as well. (7 arguments: the field, the pose, the points, the
+    map's resolution and the field's sigma in cells.)"""
+    px, py = pts[:, 0] / resolution, pts[:, 1] / resolution
+    f = field_samples(field, np.array([[u, v, yaw]]), px, py)[0]
+    explained = f > math.exp(-4.5)
+    if explained.sum() < 3:
+        explained = np.ones(len(f), bool)
+    d2 = -2.0 * sigma_cells ** 2 * np.log(np.clip(f[explained], math.exp(-4.5), 1.0))
+    reach = math.sqrt(float(np.mean(px[explained] ** 2 + py[explained] ** 2)))
+    return max(float(d2.mean()), 1.0 / 12.0), max(reach, 1.0)
 
 
 def warm_up() -> None:
