@@ -14,7 +14,8 @@ SUITE_TRIALS = {
     'carmen': 'real 180° laser logs, held-out maps',
     'prior': 'pybullet scans with a search prior, every radius pooled',
     'changed': 'ray-cast scans in a world changed since its map, levels 0-3 pooled',
-    'unmapped': 'ray-cast scans, the map without its walls within 2 or 4 m of the robot',
+    'unmapped': 'ray-cast scans, the map without its walls within 2 or 4 m of the robot (unknown or free), or an '
+                'unknown room beside it',
     'sensors': 'front 180° / 270°, front + rear 270°, 3D lidar views at the same poses, pooled',
     'scaling': 'tiled building maps 500² to 6000²',
 }

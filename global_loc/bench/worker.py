@@ -47,6 +47,7 @@ def run_job(job):
                score=res.score if math.isfinite(res.score) else None, found=res.pose is not None,
                top4_ok=any(pose_correct(h.pose, trial.truth) for h in res.hypotheses[:4]),
                hyp_scores=[round(h.score, 4) for h in res.hypotheses[:4]], message=res.message.split(':')[0],
+               twin='its twin' in res.message,
                outcome=res.outcome.label)
     if res.raw is not None:      # a thesis matcher checked on the map: its own verdict too (the thesis's numbers)
         row.update(raw_success=res.raw.success, raw_outcome=res.raw.outcome.label,
