@@ -1,7 +1,8 @@
-"""Unknown is not evidence: a return landing on a cell the map does not know neither
-explains nor contradicts a place (docs/METHOD.md, "Unknown cells"). A place whose nearby
-walls were never mapped stays a rival of its fully mapped twin, so the twin is never
-answered confidently; where the map knows every cell a scan reaches, nothing changes."""
+"""Unknown is not evidence (bnb.unknown_credit, opt-in): a return landing on a cell the map
+does not know neither explains nor contradicts a place (docs/METHOD.md, "Unknown cells").
+A place whose nearby walls were never mapped stays a rival of its fully mapped twin, so
+the twin is never answered confidently; where the map knows every cell a scan reaches,
+nothing changes. The twin is named whatever the option."""
 import math
 
 import numpy as np
@@ -9,8 +10,9 @@ import pytest
 
 from conftest import grid_map, walled
 from global_loc.bench.unmapped import unmapped_around
-from global_loc.core.localizer import Localizer
+from global_loc.core.localizer import Localizer, LocalizerConfig
 from global_loc.core.map_io import UNKNOWN, make_map
+from global_loc.core.matchers.bnb import BranchAndBoundOptions
 from global_loc.core.outcome import Outcome
 from global_loc.core.transform import Rigid2D, pose_correct
 from global_loc.sim.raycast import simulate_scan
@@ -25,6 +27,9 @@ def half_turn_symmetric_hall():
         grid[r0:r1, c0:c1] = 100
         grid[80 - r1:80 - r0, 160 - c1:160 - c0] = 100            # the same block turned by a half turn
     return grid_map(grid)
+
+
+CREDITED = LocalizerConfig(bnb=BranchAndBoundOptions(unknown_credit=1.0 / 3.0))
 
 
 def twin_of(pose: Rigid2D) -> Rigid2D:
@@ -45,7 +50,8 @@ def test_a_place_whose_nearby_walls_are_unknown_is_never_answered_at_its_twin(po
     assert any(pose_correct(h.pose, twin_of(pose)) for h in full.hypotheses)
     assert 'its twin' in full.message, full.message
     cut = unmapped_around(hall, pose, radius)           # the true place's nearby walls never mapped
-    result = Localizer(cut).localize(scan)
+    assert Localizer(cut).localize(scan).outcome != Outcome.NO_MATCH
+    result = Localizer(cut, CREDITED).localize(scan)
     assert not (result.success and pose_correct(result.pose, twin_of(pose))), result.message
     assert result.outcome == Outcome.AMBIGUOUS, result.message
     assert any(pose_correct(h.pose, pose) for h in result.hypotheses), result.message
@@ -68,7 +74,7 @@ def test_where_the_map_knows_every_cell_the_scan_reaches_the_answer_is_unchanged
         if not (0 <= row < office_map.height and 0 <= col < office_map.width) or not office_map.free[row, col]:
             continue
         scan = simulate_scan(office_map, pose, 270, 541, 20.0, noise_std=0.01, rng=rng)
-        a, b = Localizer(office_map).localize(scan), Localizer(patched).localize(scan)
+        a, b = Localizer(office_map).localize(scan), Localizer(patched, CREDITED).localize(scan)
         if not a.success:
             continue
         assert (a.outcome, a.pose, a.score) == (b.outcome, b.pose, b.score), (pose, a.message, b.message)

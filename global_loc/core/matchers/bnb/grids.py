@@ -48,8 +48,8 @@ class PrecomputationGridStack:
             raise ValueError(f'bnb levels must be 1 .. {most}, got {options.levels}')
         # Built in the order that keeps the peak low: the planes, the largest part, last, and
         # every array written where it is kept (36 Mcells: peak 1038 -> 881 MB, see fill_planes).
-        open_unknown = occupancy_map.open_unknown()
-        has_unknown = bool(open_unknown.any())
+        open_unknown = occupancy_map.open_unknown() if options.unknown_credit > 0 else None
+        has_unknown = open_unknown is not None and bool(open_unknown.any())
         field = likelihood_field(occupancy_map, options.sigma_cells, also=open_unknown if has_unknown else None)
         del open_unknown
         self.occupied = occupancy_map.occupied.view(np.uint8)     # 0 / 1 for the free-space check, no copy

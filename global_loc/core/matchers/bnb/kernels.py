@@ -13,7 +13,7 @@ Two scores per pose: the evidence (what the map explains: unknown cells count fo
 nothing), by which the best leaf, and so the band, is chosen; and the optimistic score,
 which the bounds bound and the band is cut by, so that a place is never pruned for what
 the map does not say: unknown cells a beam can reach may hide a wall (the optimistic
-planes), but at most verdict.MAX_UNKNOWN_SHARE of the scan is credited that way - the
+planes), but at most bnb.unknown_credit of the scan is credited that way - the
 score is min(optimistic sum, evidence sum + that share), both sums bounded by their own
 planes (a map without unknown cells has one set, and the two scores are one).
 
@@ -41,7 +41,7 @@ from .verdict import keep_floor
 Planes = namedtuple('Planes', 'flat shift plane_width pad width height evidence')
 # base[h, i]: where the plane point i reads at level h starts; du, dv[row, i]: point i's
 # cell offset at the angle of `row`; level h's rows start at row_start[h]; credit: the most
-# a pose's optimistic score may exceed its evidence (raw: verdict.MAX_UNKNOWN_SHARE of the
+# a pose's optimistic score may exceed its evidence (raw: bnb.unknown_credit of the
 # points taken as explained on unknown cells; a value, not a compiled-in constant, so a
 # change reaches the cached kernels).
 ScanTables = namedtuple('ScanTables', 'base du dv row_start credit')

@@ -43,7 +43,6 @@ from .refine import refine
 from .refine import warm_up as warm_up_refine
 from .search import Resume, SearchRun, SearchStats, SettledFn, ThreadedSearch, search_threads, top_in_band
 from .verdict import (
-    MAX_UNKNOWN_SHARE,
     explained_share,
     judge,
     needed_lead,
@@ -121,7 +120,7 @@ class BranchAndBoundMatcher(Matcher):
             thetas.append((np.arange(0, n_angles, size) + (size - 1) / 2.0) * d0)
         du, dv = offset_tables(np.concatenate(thetas), pts[:, 0] / res, pts[:, 1] / res)   # (rows, points)
         return ScanTables(self.stack.offsets[gid], du, dv, np.array(row_start, np.int64),
-                          int(MAX_UNKNOWN_SHARE * 255 * len(pts)))
+                          int(self.options.unknown_credit * 255 * len(pts)))
 
     def bounds(self, level: int, tu, tv, ta, pts, d0) -> np.ndarray:
         """Bounds (level > 0) or exact scores (level 0) of nodes (tu, tv, ta), in [0, 1]."""
@@ -148,7 +147,7 @@ class BranchAndBoundMatcher(Matcher):
 
     def unknown_rivals(self, tree: 'TreeSearch', options: MatchOptions) -> 'TreeSearch':
         """The search again, over the optimistic planes (unknown cells a beam can reach may
-        hide a wall, for at most MAX_UNKNOWN_SHARE of the scan: kernels), pruned from the
+        hide a wall, for at most bnb.unknown_credit of the scan: kernels), pruned from the
         start by the best leaf's band: every place whose optimistic score reaches it, so
         that a place whose walls the map lacks is never pruned for them and stays a rival
         (verdict.rival_scores). Run only after a confident answer (any other is not made

@@ -12,7 +12,6 @@ from .free_space import clear_returns, on_unknown, see_through_fractions
 from .grids import PrecomputationGridStack
 from .options import BranchAndBoundOptions
 from .refine import bin_maxima, field_samples, landscape_covariance, refine
-from .verdict import MAX_UNKNOWN_SHARE
 
 
 class PeakRefiner:
@@ -65,7 +64,7 @@ class PeakRefiner:
         optimistic = np.where(clear, field_samples(self.stack.optimistic, refined[:, :3], px, py),
                               field_samples(self.stack.field, refined[:, :3], px, py)).mean(axis=1) \
             if len(refined) else np.zeros(0)
-        optimistic = np.clip(optimistic, refined[:, 3], refined[:, 3] + MAX_UNKNOWN_SHARE)    # as the search credits it
+        optimistic = np.clip(optimistic, refined[:, 3], refined[:, 3] + opt.unknown_credit)    # as the search does
         unknown = (clear & on_unknown(self.stack.occupancy, refined[:, :3], pts, res)).mean(axis=1) \
             if len(refined) else np.zeros(0)
         through = see_through_fractions(self.stack.occupied, refined[:, :3], points, res, opt)

@@ -61,14 +61,6 @@ REFINED_GAIN = 0.05
 LEAD_TOLERANCE = 1e-9
 
 
-# A place is judged by what the map cannot rule out (its optimistic score: a return on, or
-# near, an unknown cell a beam can reach counts as possibly explained), but at most this
-# share of the scan is credited that way: without a cap a free speck in unknown, or the
-# map's ragged edge, would fit any scan fully and no answer could ever be confident; with
-# it, a place must be made of what the map says for the rest. The search bounds the same
-# capped score (kernels: the two scores), so it never prunes such a place.
-MAX_UNKNOWN_SHARE = 1.0 / 3.0
-
 # Headings this close to a half turn apart make two places each other's twin (a building
 # symmetric under a half turn: the scan fits both)
 TWIN_TOLERANCE = math.radians(20.0)
@@ -76,8 +68,8 @@ TWIN_TOLERANCE = math.radians(20.0)
 
 def rival_scores(c: Candidate) -> tuple[float, float]:
     """(ranking score, field score) of another place as a rival of the best: what the map
-    cannot rule out there (its optimistic score, capped at MAX_UNKNOWN_SHARE above its
-    evidence when refined: matcher.refine_peaks) - returns on unknown cells neither explain
+    cannot rule out there (its optimistic score, capped at options.unknown_credit above
+    its evidence when refined: peaks.PeakRefiner) - returns on unknown cells neither explain
     nor contradict it."""
     if c.optimistic is None:
         return c.score, c.explained
@@ -115,7 +107,7 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
     margin is the smaller of the ranking score's and the field score's: the free-space
     check may reorder places but never vouches for one alone. Another place is measured by
     what the map cannot rule out (rival_scores): returns on unknown cells count for it,
-    not against it, for up to MAX_UNKNOWN_SHARE of the scan - a place whose walls were
+    not against it, for up to bnb.unknown_credit of the scan - a place whose walls were
     never mapped stays a rival of its fully mapped twin. `localized` needs confidence >=
     min_confidence; otherwise `poor match` when the map explains too little of the scan,
     else `ambiguous`.
