@@ -14,12 +14,14 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.signals import SignalHandlerOptions
 
 from .memory import limit_arenas
+from .param_types import ParameterError
 
 
 def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]] = None,
              startup_errors: tuple = (), args=None) -> int:
     """Spin the node `make_node()` builds; return the exit code. An exception listed in
-    `startup_errors` (e.g. a map that cannot be loaded) is printed as one line and exits 1."""
+    `startup_errors` (e.g. a map that cannot be loaded) is printed as one line and exits 1;
+    a parameter it cannot run with (param_types.ParameterError), 2 - a usage error."""
     # `kill -USR1` prints every thread's stack: how a node that does not stop is diagnosed.
     faulthandler.register(signal.SIGUSR1, all_threads=True)
     limit_arenas()       # before any thread starts (memory.py says why)
@@ -46,7 +48,7 @@ def run_node(make_node: Callable, make_executor: Optional[Callable[[], Executor]
         pass
     except startup_errors as e:
         print(f'{getattr(node, "get_name", lambda: "global_loc")()}: {e}', file=sys.stderr)
-        code = 1
+        code = 2 if isinstance(e, ParameterError) else 1
     except Exception:
         if rclpy.ok():
             raise

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import InvalidParameterValueException, ParameterUninitializedException
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 
 from ..core import limits
@@ -27,6 +27,7 @@ from ..core.request import BOUNDS, RequestDefaults
 from ..core.supervisor import SupervisorConfig
 from ..core.transform import Rigid2D
 from ..core.view import ViewConfig
+from .param_types import ParameterError, declare, describe, typed_value
 from .sensors import check_mount_value, sensor_specs
 
 _L, _S, _V = LocalizerConfig(), SupervisorConfig(), ViewConfig()
@@ -131,7 +132,7 @@ SPECS = [
 BY_NAME = {s.name: s for s in SPECS}
 
 
-class ConfigError(ValueError):
+class ConfigError(ParameterError):
     """A parameter value the server cannot run with; the message names it."""
 
 
@@ -185,10 +186,11 @@ def check_map_set(v: dict) -> None:
 
 def build_config(values: dict, mounts: dict | None = None) -> ServerConfig:
     """The snapshot of `values`; ConfigError naming the first value it cannot run with."""
-    for name, value in values.items():
-        lo_hi = BY_NAME[name].range
-        if lo_hi is not None and not (lo_hi[0] <= value <= lo_hi[1]):
-            raise ConfigError(f'parameter {name}: {value} is outside [{lo_hi[0]}, {lo_hi[1]}]')
+    try:       # an integer for a double is that double (param_types); a value of another kind is refused
+        values = {name: typed_value(name, BY_NAME[name].default, value, BY_NAME[name].range)
+                  for name, value in values.items()}
+    except ParameterError as e:
+        raise ConfigError(str(e)) from None
     v = values
     check_map_set(v)
     try:
@@ -224,14 +226,7 @@ def build_config(values: dict, mounts: dict | None = None) -> ServerConfig:
 
 def _descriptor(spec: Spec) -> ParameterDescriptor:
     when = 'live' if spec.live else 'applied on configure'
-    d = ParameterDescriptor(description=f'{spec.description} [{when}]')
-    if spec.range is not None:
-        lo, hi = spec.range
-        if isinstance(spec.default, int) and not isinstance(spec.default, bool):
-            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
-        else:
-            d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi))]
-    return d
+    return describe(spec.default, f'{spec.description} [{when}]', spec.range)
 
 
 def declare_parameters(node) -> dict[str, str]:
@@ -242,11 +237,9 @@ def declare_parameters(node) -> dict[str, str]:
     for spec in SPECS:
         # an empty list says no type: declared as a string array without a value (read as [])
         default = Parameter.Type.STRING_ARRAY if spec.default == [] else spec.default
-        try:
-            node.declare_parameter(spec.name, default, _descriptor(spec))
-        except InvalidParameterValueException as e:
-            node.declare_parameter(spec.name, default, _descriptor(spec), ignore_override=True)
-            problems[spec.name] = f'parameter {spec.name}: {e}'
+        problem = declare(node, spec.name, default, _descriptor(spec))
+        if problem:
+            problems[spec.name] = problem
     return problems
 
 
@@ -271,12 +264,9 @@ def read_config(node) -> ServerConfig:
         if not node.has_parameter(sensor.mount_parameter):
             descriptor = ParameterDescriptor(description=f'{sensor.topic} on the base (x y z roll pitch yaw; m, '
                                                          f'rad) when tf2 has none [applied on configure]')
-            try:
-                node.declare_parameter(sensor.mount_parameter, Parameter.Type.DOUBLE_ARRAY, descriptor)
-            except InvalidParameterValueException as e:    # the value it was started with; set it and configure
-                node.declare_parameter(sensor.mount_parameter, Parameter.Type.DOUBLE_ARRAY, descriptor,
-                                       ignore_override=True)
-                raise ConfigError(f'parameter {sensor.mount_parameter}: {e}') from None
+            problem = declare(node, sensor.mount_parameter, Parameter.Type.DOUBLE_ARRAY, descriptor)
+            if problem:     # the value it was started with; set it and configure
+                raise ConfigError(problem)
         mounts[sensor.topic] = parameter_value(node, sensor.mount_parameter) or None
     return build_config(values, mounts)
 

@@ -23,7 +23,6 @@ from dataclasses import replace
 import numpy as np
 from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan, PointCloud2
@@ -37,6 +36,17 @@ from ..sim.simulator import OdometryNoise, Simulator
 from .cloud import cloud_to_msg
 from .convert import pose_from_msg, pose_to_msg, scan_to_msg
 from .node_main import exit_process, run_node
+from .param_types import ParameterError, declare, describe, typed_value
+
+# Each number's range (inclusive): a rate, a beam count or a range outside it is one line and
+# exit code 2 at start, not a timer or a ray caster failing later.
+SIM_RANGES = {
+    'x': (-1e6, 1e6), 'y': (-1e6, 1e6), 'yaw': (-100.0, 100.0),
+    'fov_deg': (1.0, 360.0), 'num_beams': (1, 100000), 'range_min': (0.0, 1000.0), 'range_max': (0.01, 1000.0),
+    'noise_std': (0.0, 10.0), 'dropout': (0.0, 1.0), 'rate_hz': (0.01, 1000.0), 'clutter': (0, 1000),
+    'seed': (0, 2 ** 31 - 1), 'odom_noise': (0.0, 1.0), 'odom_drift': (-10.0, 10.0), 'rear_fov_deg': (1.0, 360.0),
+    'lidar_rate_hz': (0.01, 1000.0),
+}
 
 
 class SimNode(Node):
@@ -44,7 +54,12 @@ class SimNode(Node):
         super().__init__('global_loc_sim')
 
         def param(name, value, description):
-            return self.declare_parameter(name, value, ParameterDescriptor(description=description)).value
+            """Declared with its range (SIM_RANGES); its value, or ParameterError naming it."""
+            lo_hi = SIM_RANGES.get(name)
+            problem = declare(self, name, value, describe(value, description, lo_hi))
+            if problem:
+                raise ParameterError(problem)
+            return typed_value(name, value, self.get_parameter(name).value, lo_hi)
 
         map_yaml = param('map_yaml', default_map_yaml(), 'map the world is built from')
         start = Rigid2D(param('x', 0.0, 'start x, m'), param('y', 0.0, 'start y, m'),
@@ -55,6 +70,8 @@ class SimNode(Node):
                             noise_std=param('noise_std', 0.01, 'Gaussian range noise, m'),
                             dropout=param('dropout', 0.01, 'fraction of beams with no return'),
                             rate_hz=param('rate_hz', 10.0, 'scan rate, Hz'))
+        if laser.range_max <= laser.range_min:
+            raise ParameterError(f'parameter range_max: {laser.range_max} must exceed range_min ({laser.range_min})')
         clutter = param('clutter', 0, 'number of random objects (not in the map) placed in the world')
         seed = param('seed', 0, 'random seed for noise and clutter')
         odometry = OdometryNoise(scale_std=param('odom_noise', 0.02, "odometry: random share of each wheel's travel"),
@@ -136,7 +153,7 @@ class SimNode(Node):
 
 
 def main(args=None):
-    exit_process(run_node(SimNode, startup_errors=(MapError,), args=args))
+    exit_process(run_node(SimNode, startup_errors=(MapError, ParameterError), args=args))
 
 
 if __name__ == '__main__':
