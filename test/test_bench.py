@@ -231,3 +231,13 @@ def test_the_tail_section_says_which_targets_are_met_from_its_rows():
     big_line = next(v for k, v in lines.items() if '(36 Mcells)' in k)
     assert '70% of them at the two coarsest levels (blocks of 16 and 8 cells' in big_line
     assert '300.0 µs each' in big_line
+
+
+@pytest.mark.process
+def test_an_unknown_suite_exits_2_naming_the_suites_and_touches_nothing(tmp_path):
+    (tmp_path / 'REPORT.md').write_text('an earlier report')
+    done = subprocess.run([sys.executable, '-m', 'global_loc.bench', '--suite', 'nope', '--out', str(tmp_path)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert 'unknown suite(s) nope' in done.stderr and 'unmapped' in done.stderr, done.stderr
+    assert sorted(os.listdir(tmp_path)) == ['REPORT.md'] and (tmp_path / 'REPORT.md').read_text() == 'an earlier report'

@@ -79,6 +79,11 @@ def machine_info() -> dict:
             'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}
 
 
+# every suite --suites takes (the help says what each is)
+SUITES = ('cut', 'sim', 'carmen', 'prior', 'relocalization', 'scaling', 'changed', 'unmapped', 'sensors', 'soak',
+          'faults', 'follow', 'tail', 'maps')
+
+
 def parse_args(argv):
     parser = argparse.ArgumentParser(prog='python -m global_loc.bench', description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='few poses and maps: a few minutes')
@@ -236,8 +241,12 @@ def main(argv=None) -> int:
     out = args.out or os.path.join(REPO, 'benchmarks', 'results', 'quick' if args.quick else '')
     if args.report_only:
         return report_again(out)
-    os.makedirs(out, exist_ok=True)
     suites, methods = args.suites.split(','), args.methods.split(',')
+    unknown = [s for s in suites if s not in SUITES]
+    if unknown:     # before anything is written: a typo must not overwrite a report with an empty one
+        print(f'unknown suite(s) {", ".join(unknown)}; the suites: {", ".join(SUITES)}', file=sys.stderr)
+        return 2
+    os.makedirs(out, exist_ok=True)
     if not os.path.isdir(args.shared):
         print(f'note: {args.shared} not found: real maps and logs are skipped', file=sys.stderr)
     t0 = time.time()
