@@ -99,7 +99,7 @@ def child_bound(planes, tables, u, v, a, h, parent, parent_rest, ev_parent, ev_r
     pruned, most of them after a few points."""
     row = tables.row_start[h] + (a >> h)
     total = 0
-    if planes.evidence == 0:
+    if planes.evidence == 0:      # one set of planes (the default): half the reads, on the hot path
         for i in range(tables.du.shape[1]):
             total += min(plane_value(planes, tables.base[h, i], h, u + planes.pad + tables.du[row, i],
                                      v + planes.pad + tables.dv[row, i]), parent[i])
@@ -221,23 +221,22 @@ def search_step(planes, tables, free, space, held, heap, shared_best, budget, pe
             if h == 1:      # a leaf: its exact scores (evidence <= optimistic: below hold, neither counts)
                 if cb < hold:
                     continue
-                if ev > best:
+                if ev > best:     # (a raised hold stays <= best <= cb: the leaf is kept)
                     best = ev
                     floor = keep_floor(space, best, n_points)
                     hold = keep_floor(held, best, n_points)
                     if ev > shared_best[0]:
                         shared_best[0] = ev
-                if cb >= hold:
-                    if n_leaves == leaves.shape[0]:
-                        grown = np.empty((2 * n_leaves, 5), np.int64)
-                        grown[:n_leaves] = leaves
-                        leaves = grown
-                    leaves[n_leaves, 0] = cu
-                    leaves[n_leaves, 1] = cv
-                    leaves[n_leaves, 2] = ca
-                    leaves[n_leaves, 3] = cb
-                    leaves[n_leaves, 4] = ev
-                    n_leaves += 1
+                if n_leaves == leaves.shape[0]:
+                    grown = np.empty((2 * n_leaves, 5), np.int64)
+                    grown[:n_leaves] = leaves
+                    leaves = grown
+                leaves[n_leaves, 0] = cu
+                leaves[n_leaves, 1] = cv
+                leaves[n_leaves, 2] = ca
+                leaves[n_leaves, 3] = cb
+                leaves[n_leaves, 4] = ev
+                n_leaves += 1
             elif cb >= hold:
                 keys, nodes = heap_push(keys, nodes, size, heap_key(cb, h - 1), cu, cv, ca)
     return expanded, done, leaves[:n_leaves], (keys, nodes, size)

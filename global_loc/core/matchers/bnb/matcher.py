@@ -41,12 +41,8 @@ from .options import BranchAndBoundOptions
 from .peaks import PeakRefiner
 from .refine import refine
 from .refine import warm_up as warm_up_refine
-from .search import Resume, SearchRun, SearchStats, SettledFn, ThreadedSearch, search_threads, top_in_band
-from .verdict import (
-    explained_share,
-    judge,
-    needed_lead,
-)
+from .search import Resume, SearchRun, SearchStats, SettledFn, ThreadedSearch, kept_leaves, search_threads, top_in_band
+from .verdict import explained_share, judge, needed_lead
 
 
 class TreeSearch(NamedTuple):
@@ -56,9 +52,15 @@ class TreeSearch(NamedTuple):
     run: SearchRun
     stats: SearchStats
     stopped: str           # why the search stopped early ('' when it did not)
-    space: SearchSpace     # what it searched (the map, the headings, the prior)
+    space: SearchSpace     # what it searched (the map, the headings, the prior, the band it ended with)
     tops: tuple            # its top nodes (u, v, a) and tables, for the search for unknown's rivals
     deadline: float        # time.monotonic() by which the match must end
+
+
+def stop_reason(expansions: int, max_nodes: int, max_search_s: float) -> str:
+    """Why a search that was not exhaustive stopped: its node budget or its time limit."""
+    return f'stopped after {expansions} node expansions' if expansions >= max_nodes \
+        else f'stopped at the {max_search_s:g} s search limit'
 
 
 SETTLED = ('the search ended once no place it had not scored could make the answer confident: the hypotheses are '
@@ -158,17 +160,17 @@ class BranchAndBoundMatcher(Matcher):
         top = self.options.levels - 1
         bounds = self.searcher.node_bounds(self.stack.planes, tables, tu, tv, ta, top)
         evidence = int(first.leaves[:, 4].max())
-        space = tree.space
-        left = max(1, (options.max_nodes or self.options.max_nodes) - int(first.per_level.sum()))
+        max_nodes = options.max_nodes or self.options.max_nodes
+        left = max(1, max_nodes - int(first.per_level.sum()))
         start = time.perf_counter()
-        run = self.searcher.run(self.stack.planes, tables, self.stack.free, space,
+        run = self.searcher.run(self.stack.planes, tables, self.stack.free, tree.space,
                                 np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, left, None,
                                 tree.deadline, None, evidence, None)
         expansions = int(first.per_level.sum() + run.per_level.sum())
-        stopped = '' if run.exact else (
-            f'stopped after {expansions} node expansions' if run.per_level.sum() >= left
-            else f'stopped at the {options.max_search_s:g} s search limit')
-        leaves = np.unique(np.concatenate([first.leaves, run.leaves]), axis=0)
+        stopped = '' if run.exact else stop_reason(expansions, max_nodes, options.max_search_s)
+        # a pose both searches kept once, with its optimistic score (an exhaustive second search
+        # holds every leaf of the first: its evidence reaches the band)
+        leaves = kept_leaves([run.leaves, first.leaves], tree.space, evidence, len(tree.pts))
         stats = dataclasses.replace(tree.stats, exact=run.exact, leaves=len(leaves), expansions=expansions,
                                     per_level=tuple((first.per_level + run.per_level).tolist()),
                                     search_s=tree.stats.search_s + time.perf_counter() - start)
@@ -230,9 +232,7 @@ class BranchAndBoundMatcher(Matcher):
         search_s = time.perf_counter() - search_start
         scores = run.leaves[:, 4] / (255.0 * len(pts))      # evidence
         expansions = int(run.per_level.sum())
-        stopped = '' if run.exact or run.settled else (
-            f'stopped after {expansions} node expansions' if expansions >= max_nodes
-            else f'stopped at the {options.max_search_s:g} s search limit')
+        stopped = '' if run.exact or run.settled else stop_reason(expansions, max_nodes, options.max_search_s)
         stats = SearchStats(exact=run.exact, angles=n_angles, points=len(pts), leaves=len(scores),
                             expansions=expansions, per_level=tuple(run.per_level.tolist()), top_nodes=len(tu),
                             threads=search_threads(), best_leaf=float(scores.max()) if len(scores) else 0.0,
@@ -240,7 +240,8 @@ class BranchAndBoundMatcher(Matcher):
                             band_allowance=1.0 if run.resumed else opt.band_allowance,
                             top_in_band=top_in_band(bounds, resume.space if run.resumed else space, run.leaves,
                                                     len(pts)))
-        return TreeSearch(pts, d0, run, stats, stopped, space, (tu, tv, ta, tables), deadline)
+        return TreeSearch(pts, d0, run, stats, stopped, resume.space if run.resumed else space, (tu, tv, ta, tables),
+                          deadline)
 
     def resume_rule(self, space: SearchSpace, pts, d0, points: ScanPoints) -> Optional[Resume]:
         """See early_end.resume_rule."""

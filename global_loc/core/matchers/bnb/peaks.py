@@ -29,10 +29,10 @@ class PeakRefiner:
         opt = self.options
         frame = self.map.frame
         tu, tv, ta, scores = leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, column] / norm
+        bins = bin_maxima(tu, tv, ta, scores, d0, self.map.height, opt.distinct_m / self.map.resolution / 2,
+                          opt.distinct_angle / 2)
         return distinct([Candidate(frame.pixel_pose_to_world(float(tu[i]), float(tv[i]), float(ta[i] * d0)),
-                                        float(scores[i]))
-                              for i in bin_maxima(tu, tv, ta, scores, d0, self.map.height,
-                                                  opt.distinct_m / self.map.resolution / 2, opt.distinct_angle / 2)],
+                                   float(scores[i])) for i in bins],
                         opt.hypotheses, opt.distinct_m, opt.distinct_angle)
 
     def refine(self, leaves: np.ndarray, pts, d0, points: ScanPoints) -> tuple[list, list, list[Candidate]]:
@@ -40,12 +40,11 @@ class PeakRefiner:
         in metres): the best places by evidence, and - where unknown cells lift some
         leaves' optimistic scores - the best by optimistic score too, each refined on the
         evidence field and ranked by field score x (1 - see-through share), with its
-        optimistic score at the refined pose (never below its leaf's: a rival the map
-            cannot rule out, verdict.judge) and its share of points on unknown cells with
-        nothing mapped in the way. At most
-        `hypotheses` of them: the best-ranked, and the strongest such rival. The best
-        carries the landscape covariance. Returns (the peaks' leaf scores, their refined fits,
-        the hypotheses)."""
+        optimistic score at the refined pose (a rival the map cannot rule out,
+        verdict.judge) and its share of points on unknown cells with nothing mapped in the
+        way. At most `hypotheses` of them: the best-ranked, and the strongest such rival. The
+        best carries the landscape covariance. Returns (the peaks' leaf scores, their refined
+        fits, the hypotheses)."""
         opt = self.options
         frame = self.map.frame
         norm = 255.0 * len(pts)
@@ -57,16 +56,8 @@ class PeakRefiner:
         refined = np.array([refine(self.stack.field, u, v, yaw, pts, self.map.resolution)
                             for u, v, yaw in starts]).reshape(-1, 4)
         res = self.map.resolution
-        # what the map cannot rule out: a return whose beam reaches it through free and
-        # unknown cells may have hit a wall the map lacks (the optimistic field there)
-        clear = clear_returns(self.stack.occupied, refined[:, :3], pts, res, opt)
-        px, py = pts[:, 0] / res, pts[:, 1] / res
-        optimistic = np.where(clear, field_samples(self.stack.optimistic, refined[:, :3], px, py),
-                              field_samples(self.stack.field, refined[:, :3], px, py)).mean(axis=1) \
-            if len(refined) else np.zeros(0)
-        optimistic = np.clip(optimistic, refined[:, 3], refined[:, 3] + opt.unknown_credit)    # as the search does
-        unknown = (clear & on_unknown(self.stack.occupancy, refined[:, :3], pts, res)).mean(axis=1) \
-            if len(refined) else np.zeros(0)
+        optimistic, unknown = self.unknown_scores(refined, pts) if self.stack.has_unknown else \
+            (refined[:, 3], [None] * len(refined))
         through = see_through_fractions(self.stack.occupied, refined[:, :3], points, res, opt)
         rank = refined[:, 3] * (1.0 - through)
         order = list(np.argsort(-rank, kind='stable'))
@@ -75,9 +66,24 @@ class PeakRefiner:
             order = order[:opt.hypotheses] if rival in order[:opt.hypotheses] else \
                 order[:opt.hypotheses - 1] + [rival]
         out = [Candidate(frame.pixel_pose_to_world(*refined[i, :3]), float(rank[i]), explained=float(refined[i, 3]),
-                         see_through=float(through[i]), optimistic=float(optimistic[i]), unknown=float(unknown[i]))
+                         see_through=float(through[i]), optimistic=float(optimistic[i]), unknown=unknown[i])
                for i in order]
         if out:
             out[0].covariance = landscape_covariance(self.stack.field, frame, *refined[order[0], :3], pts,
                                                      opt.sigma_cells)
         return [c.score for c in peaks], [float(f) for f in refined[:, 3]], out
+
+    def unknown_scores(self, refined: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, list[float]]:
+        """Per refined pose (rows u, v, yaw, fit): what the map cannot rule out there - a
+        return whose beam reaches it through free and unknown cells may have hit a wall the
+        map lacks (the optimistic field there), capped at unknown_credit above the fit as
+        the search bounds it - and the share of its points on unknown cells so reached."""
+        res, opt = self.map.resolution, self.options
+        if len(refined) == 0:
+            return np.zeros(0), []
+        clear = clear_returns(self.stack.occupied, refined[:, :3], pts, res, opt)
+        px, py = pts[:, 0] / res, pts[:, 1] / res
+        optimistic = np.where(clear, field_samples(self.stack.optimistic, refined[:, :3], px, py),
+                              field_samples(self.stack.field, refined[:, :3], px, py)).mean(axis=1)
+        unknown = (clear & on_unknown(self.stack.occupancy, refined[:, :3], pts, res)).mean(axis=1)
+        return np.clip(optimistic, refined[:, 3], refined[:, 3] + opt.unknown_credit), [float(u) for u in unknown]

@@ -142,11 +142,12 @@ def residual_spread(field: np.ndarray, u: float, v: float, yaw: float, pts: np.n
     their range, fits about as well. (7 arguments: the field, the pose, the points, the
     map's resolution and the field's sigma in cells.)"""
     px, py = pts[:, 0] / resolution, pts[:, 1] / resolution
+    within = math.exp(-0.5 * 3.0 ** 2)      # the field 3 sigma from a wall
     f = field_samples(field, np.array([[u, v, yaw]]), px, py)[0]
-    explained = f > math.exp(-4.5)
+    explained = f > within
     if explained.sum() < 3:
         explained = np.ones(len(f), bool)
-    d2 = -2.0 * sigma_cells ** 2 * np.log(np.clip(f[explained], math.exp(-4.5), 1.0))
+    d2 = -2.0 * sigma_cells ** 2 * np.log(np.clip(f[explained], within, 1.0))
     reach = math.sqrt(float(np.mean(px[explained] ** 2 + py[explained] ** 2)))
     return max(float(d2.mean()), 1.0 / 12.0), max(reach, 1.0)
 

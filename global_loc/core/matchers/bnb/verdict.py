@@ -158,8 +158,9 @@ def ambiguous_verdict(best: Candidate, others: list[Candidate], ranks, best_fit:
     twin = '; the closest is the best turned by about 180 deg (a symmetric place: its twin)' \
         if closest is not None and is_twin(best, closest) else ''
     # a rival only for what the map does not say (its evidence alone lies beyond the lead)
+    closest_rank, closest_fit = rival_scores(closest) if closest is not None else (0.0, 0.0)
     if closest is not None and min(closest.score / best.score, closest.explained / best_fit) < 1.0 - need <= \
-            min(rival_scores(closest)[0] / best.score, rival_scores(closest)[1] / best_fit):
+            min(closest_rank / best.score, closest_fit / best_fit):
         return Verdict(Outcome.AMBIGUOUS, conf,
                        f'ambiguous: another place, {100 * (closest.unknown or 0.0):.0f}% of its returns on cells the '
                        f'map does not know, could explain the scan as well as the best (what the map does say there '
