@@ -104,6 +104,9 @@ def test_a_moved_or_carried_robot_a_stale_file_or_a_new_map_is_not_confirmed(off
         assert result is None and 'does not confirm' in why, label
     points = scan_to_points(simulate_scan(office, truth, rng=rng, **LASER))
     assert 'stale' in confirm_stored_pose(maps, points, pose, Rigid2D(), None, 7200.0, max_age_s=3600.0)[1]
+    # stamped a year in the future (the clock went back): an age that cannot be known is stale
+    future = confirm_stored_pose(maps, points, pose, Rigid2D(), None, -31536000.0, max_age_s=3600.0)
+    assert future[0] is None and 'stamped 31536000 s in the future' in future[1]
     grown = MapSet({**maps.localizers, 'annex': maps.localizers['mirror']})
     assert 'map annex was not searched then' in confirm_stored_pose(grown, points, pose, Rigid2D(), None, 1.0)[1]
     other = StoredPose('floor_9', ('floor_9',), truth, pose.fit, 1.0, (0.0,) * 9, 0.0)

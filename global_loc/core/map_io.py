@@ -6,10 +6,8 @@ the map's GridFrame (core/grid_frame.py).
 """
 from __future__ import annotations
 
-import errno
 import math
 import os
-import stat
 from dataclasses import dataclass
 from typing import Optional
 
@@ -17,6 +15,7 @@ import cv2
 import numpy as np
 import yaml
 
+from .files import UnreadableFile, brief, not_a_regular_file, read_yaml_file
 from .grid_frame import GridFrame
 from .limits import MAP_RESOLUTION_M, MAX_MAP_CELLS
 from .transform import Rigid2D
@@ -181,9 +180,9 @@ def check_origin(origin, source: str):
     """The map origin (x, y, yaw) if it has three values, every one finite; MapError
     otherwise (a NaN origin would put every pose the matchers return at NaN)."""
     if len(origin) != 3:
-        raise MapError(f'{source}: origin must be [x, y, yaw], got {list(origin)}')
+        raise MapError(f'{source}: origin must be [x, y, yaw], got {brief(list(origin))}')
     if not all(math.isfinite(v) for v in origin):
-        raise MapError(f'{source}: origin must be finite numbers (x, y, yaw), got {list(origin)}')
+        raise MapError(f'{source}: origin must be finite numbers (x, y, yaw), got {brief(list(origin))}')
     return origin
 
 
@@ -192,23 +191,9 @@ def check_regular_file(path: str, source: str, what: str) -> None:
     what it is instead: missing, a dangling symlink, a symlink loop, a directory, a FIFO
     (opening one would block), a device or a socket - not just "not found"."""
     prefix = f'{source}: {what}' if what != source else source
-    try:
-        mode = os.stat(path).st_mode
-    except OSError as e:
-        if e.errno == errno.ELOOP:
-            raise MapError(f'{prefix} is a symlink loop (it never reaches a file)') from None
-        if os.path.islink(path):
-            raise MapError(f'{prefix} is a symlink to {os.readlink(path)!r}, which does not exist') from None
-        if e.errno == errno.ENOENT:
-            raise MapError(f'{prefix} not found') from None
-        raise MapError(f'{prefix} cannot be accessed: {e.strerror}') from None
-    kinds = [(stat.S_ISDIR, 'a directory'), (stat.S_ISFIFO, 'a FIFO (named pipe)'),
-             (stat.S_ISCHR, 'a character device'), (stat.S_ISBLK, 'a block device'), (stat.S_ISSOCK, 'a socket')]
-    for is_kind, kind in kinds:
-        if is_kind(mode):
-            raise MapError(f'{prefix} is {kind}, not a file')
-    if not os.access(path, os.R_OK):
-        raise MapError(f'{prefix} is not readable (permission denied)')
+    problem = not_a_regular_file(path)
+    if problem:
+        raise MapError(f'{prefix} {problem}')
 
 
 def _require(doc, key, path):
@@ -230,12 +215,10 @@ class _MapYaml:
 
 def _read_map_yaml(path: str) -> _MapYaml:
     """The YAML's parameters, each checked, the image's path resolved against the YAML's folder."""
-    check_regular_file(path, path, 'map YAML')
     try:
-        with open(path) as f:
-            doc = yaml.safe_load(f)
-    except (yaml.YAMLError, UnicodeDecodeError) as e:
-        raise MapError(f'{path}: not valid YAML: {e}') from None
+        doc = read_yaml_file(path)
+    except UnreadableFile as e:
+        raise MapError(f'{path}: {e}') from None
     if not isinstance(doc, dict):
         raise MapError(f'{path}: expected a mapping of map parameters, got {type(doc).__name__}')
     image_name = _require(doc, 'image', path)
@@ -250,7 +233,7 @@ def _read_map_yaml(path: str) -> _MapYaml:
     except MapError:
         raise
     except (TypeError, ValueError) as e:
-        raise MapError(f'{path}: bad value: {e}') from None
+        raise MapError(f'{path}: bad value: {brief(str(e), 200)}') from None
     mode = doc.get('mode', 'trinary')
     check_resolution(resolution, path)
     check_origin(origin, path)
@@ -258,9 +241,9 @@ def _read_map_yaml(path: str) -> _MapYaml:
         raise MapError(f'{path}: need 0 <= free_thresh < occupied_thresh <= 1, '
                        f'got free_thresh={free_th}, occupied_thresh={occ_th}')
     if negate not in (0, 1):
-        raise MapError(f'{path}: negate must be 0 or 1, got {negate}')
+        raise MapError(f'{path}: negate must be 0 or 1, got {brief(negate)}')
     if mode not in ('trinary', 'scale', 'raw'):
-        raise MapError(f'{path}: mode must be trinary, scale or raw, got {mode!r}')
+        raise MapError(f'{path}: mode must be trinary, scale or raw, got {brief(mode)}')
     image_path = image_name if os.path.isabs(image_name) else \
         os.path.join(os.path.dirname(os.path.abspath(path)), image_name)
     return _MapYaml(image_path, resolution, origin, negate, occ_th, free_th, mode)

@@ -21,8 +21,7 @@ import os
 import time
 from typing import Optional, Sequence
 
-import yaml
-
+from .files import UnreadableFile, brief, read_yaml_file
 from .localizer import LocalizationResult, Localizer
 from .matchers import TRACKER_METHOD, resolve_method
 from .matchers.base import ProgressFn
@@ -63,36 +62,56 @@ def named_paths(entries, expand: bool = True) -> dict[str, str]:
     return out
 
 
-def map_set_file_entries(path: str) -> Optional[list[str]]:
-    """The entries a map-set file lists (`maps:` PATH or NAME=PATH, or NAME: PATH), paths made
-    relative to the file's folder; None for any other file (a map YAML has no `maps`)."""
+def _map_set_doc(path: str) -> Optional[dict]:
+    """The document of a map-set file (a YAML mapping with `maps`), None for any other file:
+    loading that as a map says what is wrong with it (the same reader refuses aliases, size)."""
     if not (path.endswith(('.yaml', '.yml')) and os.path.isfile(path)):
         return None
     try:
-        with open(path, encoding='utf-8') as f:
-            doc = yaml.safe_load(f)
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
-        return None        # not a map-set file: loading it as a map says what is wrong with it
-    if not isinstance(doc, dict) or 'maps' not in doc:
+        doc = read_yaml_file(path)
+    except UnreadableFile:
+        return None
+    return doc if isinstance(doc, dict) and 'maps' in doc else None
+
+
+def map_set_file_entries(path: str) -> Optional[list[str]]:
+    """The entries a map-set file lists (`maps:` PATH or NAME=PATH, or NAME: PATH), paths made
+    relative to the file's folder; None for any other file (a map YAML has no `maps`).
+    MapSetError for an entry that is not a map: a name holding '=' or '/', the file itself,
+    another map-set file (sets do not nest)."""
+    doc = _map_set_doc(path)
+    if doc is None:
         return None
     listed = doc['maps']
     if not isinstance(listed, list) or not listed:
         raise MapSetError(f'map-set file {path}: `maps` must be a non-empty list of PATH, NAME=PATH or NAME: PATH')
     folder = os.path.dirname(os.path.abspath(path))
-    entries = []
-    for item in listed:
-        if isinstance(item, dict) and len(item) == 1:
-            (name, target), = item.items()
-            item = f'{name}={target}'
-        if not isinstance(item, str) or not item:
-            raise MapSetError(f'map-set file {path}: an entry of `maps` must be PATH, NAME=PATH or NAME: PATH, '
-                              f'got {item!r}')
+    return [_map_set_entry(item, path, folder) for item in listed]
+
+
+def _map_set_entry(item, path: str, folder: str) -> str:
+    """One entry of map-set file `path` as PATH or NAME=PATH, its path resolved against `folder`."""
+    if isinstance(item, dict) and len(item) == 1:
+        (name, target), = item.items()
+        name, target = str(name), target
+        if '=' in name or '/' in name or not name:
+            raise MapSetError(f'map-set file {path}: the map name {brief(name)} cannot be empty or hold "=" or "/"')
+    elif isinstance(item, str) and item:
         name, sep, target = item.partition('=')
         if not sep or '/' in name:
             name, target = '', item
-        target = target if os.path.isabs(target) else os.path.join(folder, target)
-        entries.append(f'{name}={target}' if name else target)
-    return entries
+    else:
+        name, target = '', None
+    if not isinstance(target, str) or not target:
+        raise MapSetError(f'map-set file {path}: an entry of `maps` must be PATH, NAME=PATH or NAME: PATH, '
+                          f'got {brief(item)}')
+    target = target if os.path.isabs(target) else os.path.join(folder, target)
+    if os.path.exists(target) and os.path.samefile(target, path):
+        raise MapSetError(f'map-set file {path}: the entry {brief(item)} is this file itself, not a map')
+    if _map_set_doc(target) is not None:
+        raise MapSetError(f'map-set file {path}: the entry {brief(item)} is another map-set file '
+                          f'(sets do not nest: list its maps here)')
+    return f'{name}={target}' if name else target
 
 
 class MapSet:

@@ -30,6 +30,7 @@ from typing import Optional
 
 import numpy as np
 
+from .files import UnreadableFile, brief, read_small_text
 from .localizer import Hypothesis, LocalizationResult
 from .motion import pose_fitter
 from .outcome import Outcome
@@ -109,13 +110,19 @@ def save_stored_pose(path: str, stored: StoredPose) -> None:
 
 
 def load_stored_pose(path: str) -> StoredPose:
+    """The stored pose in `path`; StoredPoseError saying why for any file that is not one:
+    missing, not a regular file (a FIFO would block the request), too big, not JSON (a file
+    of nested brackets too) or malformed - the caller then searches in full."""
+    if not os.path.lexists(path):
+        raise StoredPoseError(f'no stored pose in {path} (none saved yet)')
     try:
-        with open(path, encoding='utf-8') as f:
-            d = json.load(f)
-    except FileNotFoundError:
-        raise StoredPoseError(f'no stored pose in {path} (none saved yet)') from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise StoredPoseError(f'the stored pose {path} cannot be read: {e}') from None
+        d = json.loads(read_small_text(path))
+    except UnreadableFile as e:
+        raise StoredPoseError(f'the stored pose {path} cannot be read: it {e}') from None
+    except ValueError as e:
+        raise StoredPoseError(f'the stored pose {path} cannot be read: not JSON: {brief(str(e), 200)}') from None
+    except RecursionError:
+        raise StoredPoseError(f'the stored pose {path} cannot be read: not JSON: nested too deep') from None
     if not isinstance(d, dict):
         raise StoredPoseError(f'the stored pose {path} is malformed: not an object')
     return StoredPose.from_dict(d, f'the stored pose {path}')
@@ -129,6 +136,11 @@ def confirm_stored_pose(map_set, points: ScanPoints, stored: StoredPose, base_T_
     `age_s`: how long ago the pose was stored; `max_age_s`: older is stale (0: any age).
     (7 arguments: the scan, the stored pose and the three facts the start-up has about now.)"""
     t0 = time.perf_counter()
+    if not math.isfinite(age_s) or age_s < 0:
+        # stamped in the future (the clock went back, or the file came from another machine):
+        # an age that cannot be known is stale, whatever the limit
+        when = f'stamped {-age_s:.0f} s in the future (the clock went back?)' if age_s < 0 else 'of no known age'
+        return None, f'the stored pose is stale: {when}'
     if max_age_s > 0 and age_s > max_age_s:
         return None, f'the stored pose is stale: stored {age_s:.0f} s ago (stored_pose_max_age_s {max_age_s:g})'
     if stored.map not in map_set.localizers:
