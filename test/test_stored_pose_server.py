@@ -7,6 +7,7 @@ import json
 
 import pytest
 from geometry_msgs.msg import PoseWithCovarianceStamped
+from ros_helpers import localize
 from std_srvs.srv import Trigger
 
 from conftest import assert_pose_near
@@ -60,6 +61,15 @@ def test_a_restart_confirms_the_stored_pose_and_a_carried_robot_gets_a_full_sear
             server.output()[-3000:]
         assert 'start-up: localized' in server.output()
         published_near(CARRIED, 3)
+        kept = stored.read_text()
+        # an answer confident only within a search prior is published, never stored: the file
+        # keeps no prior, and a confirmation stands on the answer's being unique in its map
+        code, within = localize(env, '--timeout', '10', '--near', str(CARRIED.x), str(CARRIED.y), '0',
+                                '--radius', '1.5')
+        assert code == 0 and within['success'], within
+        published_near(CARRIED, 4)
+        assert stored.read_text() == kept
+        server.wait_for_output('the pose is not stored: it is confident within the search prior', 10.0)
         response = recorder.call(Trigger, '/global_loc_server/localize_from_stored_pose', Trigger.Request())
         assert response.success and 'the stored pose confirmed' in response.message, response.message
     finally:

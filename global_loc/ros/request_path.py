@@ -274,9 +274,19 @@ class RequestPath:
                 self.c.publish_pose(out.pose)
                 summary += f'; published on {config["initialpose_topic"]}'
                 if result.success and self.c.pose_file() is not None:
-                    self.c.pose_file().save(result, stamp_seconds(msg.header.stamp), map_set.searched(request.maps))
+                    self.store(result, request, stamp_seconds(msg.header.stamp), map_set)
         self.c.logger.info(summary)
         return out
+
+    def store(self, result, request: Request, stamp: float, map_set: MapSet) -> None:
+        """Keep a confident answer in the stored-pose file, unless it was confident only within
+        a search prior: the file keeps no prior, and its confirmation at the next start-up
+        stands on the answer having been unique in every map it lists."""
+        if request.region.bounded:
+            self.c.logger.info('the pose is not stored: it is confident within the search prior, not over the '
+                               'whole map')
+            return
+        self.c.pose_file().save(result, stamp, map_set.searched(request.maps))
 
     def scan_age(self, msg) -> float:
         age = self.c.clock_now() - stamp_seconds(msg.header.stamp)
