@@ -34,3 +34,23 @@ def test_held_out_maps_never_contain_the_held_out_scans_and_filters_count():
     # A kept scan is explained by its held-out map at its reference pose.
     assert explained_fraction(maps[kept[0].fold], kept[0].record) >= 0.7
     assert maps[0].occupied.sum() > 5000 and maps[0].free.sum() > 50000
+
+
+def test_a_record_cut_short_or_without_beams_is_skipped_naming_its_line(tmp_path, caplog):
+    """A log whose last line was cut mid-write, or with a record of 0 beams, is still a
+    log: the bad record is skipped with a warning naming its line, the rest read."""
+    import gzip
+    with gzip.open(shared_path('carmen', 'intel-corrected.log.gz'), 'rt') as f:
+        lines = [line for _, line in zip(range(3000), f)]
+    flaser = [i for i, line in enumerate(lines) if line.startswith('FLASER ')]
+    assert len(flaser) >= 10
+    lines[flaser[3]] = 'FLASER 0 0 0 0 0 0 0 1.0 host 1.0\n'                # no beams
+    lines.append(lines[flaser[-1]][:len(lines[flaser[-1]]) // 2])           # cut mid-write
+    log = tmp_path / 'cut.log'
+    log.write_text(''.join(lines))
+    with caplog.at_level('WARNING', logger='global_loc.io.carmen'):
+        records = read_flaser(str(log))
+    assert len(records) == len(flaser) - 1
+    assert f'line {flaser[3] + 1}: FLASER record skipped: 0 beams' in caplog.text
+    assert f'line {len(lines)}: FLASER record skipped' in caplog.text and 'cut short' in caplog.text
+    assert flaser[3] + 1 not in [r.line for r in records]

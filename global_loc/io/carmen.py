@@ -13,6 +13,7 @@ pose before FLASER k).
 from __future__ import annotations
 
 import gzip
+import logging
 import math
 from dataclasses import dataclass, field
 
@@ -23,6 +24,8 @@ from ..core.grid_frame import GridFrame
 from ..core.map_io import FREE, OCCUPIED, UNKNOWN, OccupancyMap, make_map
 from ..core.scan import Scan, polar_to_points
 from ..core.transform import Rigid2D
+
+LOG = logging.getLogger(__name__)
 
 
 @dataclass
@@ -35,20 +38,24 @@ class LaserRecord:
 
 
 def read_flaser(path: str) -> list[LaserRecord]:
-    """All FLASER records of a (gzipped) CARMEN log, in file order, each with its raw odometry."""
+    """All FLASER records of a (gzipped) CARMEN log, in file order, each with its raw odometry.
+    A record that cannot be read (a last line cut mid-write, 0 beams, a field not a number)
+    is skipped with a warning naming its line: the rest of the log is still a log."""
     opener = gzip.open if path.endswith('.gz') else open
     raw, odom = [], None            # odom: the last ODOM pose read
     with opener(path, 'rt') as f:
         for number, line in enumerate(f, 1):
-            if line.startswith('ODOM '):
-                odom = Rigid2D(*(float(v) for v in line.split()[1:4]))
-            if not line.startswith('FLASER '):
+            if not line.startswith(('ODOM ', 'FLASER ')):
                 continue
-            parts = line.split()
-            n = int(parts[1])
-            ranges = np.array(parts[2:2 + n], dtype=float)
-            x, y, theta = (float(v) for v in parts[2 + n:5 + n])
-            raw.append((ranges, Rigid2D(x, y, theta), float(parts[8 + n]), odom, number))
+            try:
+                if line.startswith('ODOM '):
+                    odom = _odom_pose(line)
+                    continue
+                ranges, pose, stamp = _flaser_fields(line)
+            except ValueError as e:
+                LOG.warning('%s line %d: %s record skipped: %s', path, number, line.split()[0], e)
+                continue
+            raw.append((ranges, pose, stamp, odom, number))
             odom = None
     if not raw:
         raise ValueError(f'{path}: no FLASER records')
@@ -65,6 +72,33 @@ def read_flaser(path: str) -> list[LaserRecord]:
         records.append(LaserRecord(Scan(-math.pi / 2, increment, 0.0, range_max, ranges, stamp), pose, stamp,
                                    odometry, number))
     return records
+
+
+def _odom_pose(line: str) -> Rigid2D:
+    values = line.split()[1:4]
+    if len(values) < 3:
+        raise ValueError('fewer than 3 values (a line cut short?)')
+    return Rigid2D(*_finite(values))
+
+
+def _flaser_fields(line: str) -> tuple[np.ndarray, Rigid2D, float]:
+    """(ranges, corrected laser pose, timestamp) of a FLASER line; ValueError saying why not."""
+    parts = line.split()
+    n = int(parts[1]) if len(parts) > 1 else 0
+    if n < 1:
+        raise ValueError(f'{n} beams')
+    if len(parts) < 9 + n:
+        raise ValueError(f'{len(parts)} fields, {9 + n} needed for {n} beams (a line cut short?)')
+    ranges = np.array(_finite(parts[2:2 + n]))
+    x, y, theta = _finite(parts[2 + n:5 + n])
+    return ranges, Rigid2D(x, y, theta), float(_finite(parts[8 + n:9 + n])[0])
+
+
+def _finite(values) -> list[float]:
+    numbers = [float(v) for v in values]
+    if not all(map(math.isfinite, numbers)):
+        raise ValueError('a value that is not a finite number')
+    return numbers
 
 
 @dataclass
