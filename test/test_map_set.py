@@ -99,3 +99,17 @@ def test_a_map_set_file_stands_for_the_maps_it_lists(tmp_path):
         with pytest.raises(MapSetError, match=says):
             named_paths([str(bad)])
     assert named_paths([OFFICE_YAML]) == {'office': OFFICE_YAML}       # a map YAML is a map
+
+
+def test_the_time_limit_is_one_for_the_goal_not_one_per_map(office_and_mirror):
+    """max_search_s bounds the goal: on four maps, a search that would take the whole limit
+    on each ends at about one limit, not four, and says it stopped there."""
+    import dataclasses
+    office, _, scans = office_and_mirror
+    limit = 0.5
+    slow = office.reconfigured(dataclasses.replace(office.config, max_search_s=limit))
+    floors = MapSet({f'floor_{i}': slow for i in range(4)})
+    result = floors.localize(scans[0][0], method='template_ccoeff', angle_step_deg=1.0)
+    assert result.outcome == Outcome.SEARCH_INCOMPLETE, result.message
+    assert 'search limit' in result.message, result.message
+    assert result.time_s < 2.5 * limit, result.time_s      # four limits would be 2 s and more

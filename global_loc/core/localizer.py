@@ -284,7 +284,9 @@ class Localizer:
         """`localize` for points already in the laser frame (e.g. a local map cut from the map).
         `incumbent`: a score a place elsewhere is known to reach (another map of a set): bnb
         searches only the band below it, so a map without a rival is ruled out quickly;
-        `max_nodes`: bnb's node budget for this search (0: its option's). (9 arguments: the
+        `max_nodes`: bnb's node budget for this search (0: its option's); `t0`: when the
+        time limit (max_search_s) started - a map set's goal passes its own start, so that one
+        limit holds for the goal, not one per map. (9 arguments: the
         points and `localize`'s options, each optional, named by the caller.)"""
         cfg = self.config
         t0 = time.perf_counter() if t0 is None else t0
@@ -293,7 +295,9 @@ class Localizer:
         prior = region if region is not None and region.bounded else None    # every answer lies in it
         options, searched, near, widened = self.search_options(matcher, points, angle_step_deg, base_T_laser, prior)
         laser_T_base = base_T_laser.inverse()
-        options = dataclasses.replace(options, incumbent=incumbent, max_nodes=max_nodes)
+        # the time limit counts from t0 (a map set's goal: from its start, shared by every map)
+        options = dataclasses.replace(options, incumbent=incumbent, max_nodes=max_nodes,
+                                      max_search_s=max(cfg.max_search_s - (time.perf_counter() - t0), 0.01))
         if not self._has_obstacles:
             return LocalizationResult(Outcome.NO_MATCH, f'the map {self.map.source} has no obstacles (no occupied '
                                                         f'cell) to match a scan against', matcher.name,

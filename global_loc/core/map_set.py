@@ -182,7 +182,7 @@ class MapSet:
             part = None if progress is None else (
                 lambda fraction, score, k=k: progress((k + fraction) / len(names), score))
             results[name] = tagged(self.localizers[name].localize_points(
-                points, method, angle_step_deg, part, base_T_laser, region=region, incumbent=best_leaf), name)
+                points, method, angle_step_deg, part, base_T_laser, t0=t0, region=region, incumbent=best_leaf), name)
             best_leaf = max(best_leaf, leaf_of(results[name]))
         return across({n: results[n] for n in names}, {n: self.localizers[n].tracker(method) for n in names},
                       time.perf_counter() - t0)

@@ -125,8 +125,9 @@ SPECS = [
     Spec('laser_roll', 0.0, f'laser roll on the base, rad (used without tf2): pi for a laser mounted upside down; '
                             f'a tilted laser (more than {limits.MAX_LASER_TILT_DEG:g} deg from 0 or pi) is refused',
          limits.LASER_ANGLE_RAD, live=True),
-    Spec('max_search_s', 5.0, 'seconds a search may take; then the goal ends "search incomplete" with what was '
-                              'explored (a goal always ends)', limits.MAX_SEARCH_S, live=True),
+    Spec('max_search_s', 5.0, 'seconds a goal\'s search may take, shared by every map it searches; then the goal ends '
+                              '"search incomplete" with what was explored (a goal always ends)',
+         limits.MAX_SEARCH_S, live=True),
 ] + [Spec(f'bnb.{name}', default, f'bnb matcher: {help_text} (applied on configure: a new precomputation)',
           option_range(name)) for name, _, default, help_text in option_fields()]
 BY_NAME = {s.name: s for s in SPECS}
