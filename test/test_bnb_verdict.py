@@ -13,7 +13,7 @@ from global_loc.core.matchers import MatchOptions, make_matcher
 from global_loc.core.matchers.base import Candidate
 from global_loc.core.matchers.bnb import BranchAndBoundMatcher, BranchAndBoundOptions
 from global_loc.core.matchers.bnb.kernels import SearchSpace
-from global_loc.core.matchers.bnb.verdict import judge, keep_floor, searched_keep
+from global_loc.core.matchers.bnb.verdict import confident_fit, judge, keep_floor, searched_keep
 from global_loc.core.outcome import Outcome
 from global_loc.core.scan import scan_to_points
 from global_loc.core.transform import Rigid2D
@@ -150,23 +150,29 @@ def test_the_verdict_on_the_band_has_the_outcome_of_the_verdict_on_the_whole_kee
     """Random hypotheses whose leaves score their refined fit and whose beams pass no wall:
     judged as the whole 10% band saw them (band_allowance 1) and as the band set from the
     best leaf's fit sees them (only the places within it), the same outcome and, but for
-    a confident answer's floor, the same confidence. With see-through it does not hold
+    a confident answer's floor and a poor match (its floor is the band of the lowest fit
+    that could be confident: it sees fewer places, and its confidence stays below the
+    minimum), the same confidence. With see-through it does not hold
     (the test below; docs/decisions/0010-the-narrow-band-stays-off-by-default.md): why the narrow band is
     not the default."""
     rng = np.random.default_rng(seed)
     whole, tightest = BranchAndBoundOptions(band_allowance=1.0), BranchAndBoundOptions(band_allowance=0.0)
     n_points = 200
-    space = SearchSpace(1, 1, 1, OPTIONS.keep_ratio, OPTIONS.min_confidence, 0.0, 0, 0, -1, 0, -1)
+    space = SearchSpace(1, 1, 1, OPTIONS.keep_ratio, OPTIONS.min_confidence, 0.0, confident_fit(OPTIONS.min_confidence),
+                        0, 0, -1, 0, -1)
     for _ in range(3000):
         best_raw = int(rng.integers(0.3 * 255 * n_points, 255 * n_points))
         raw = np.concatenate([[best_raw], np.floor(best_raw * rng.uniform(0.9, 1.0, rng.integers(0, 6)))])
         cands = sorted([place(i, f) for i, f in enumerate(raw / (255 * n_points))], key=lambda c: -c.score)
-        floor = keep_floor(space, best_raw, n_points) / (255 * n_points)     # no allowance: the tightest band
+        # no allowance: the tightest band (the best leaf always kept: search.kept_leaves)
+        floor = min(keep_floor(space, best_raw, n_points), best_raw) / (255 * n_points)
         seen = [c for c in cands if c.explained >= floor]
         before, after = judge(cands, whole), judge(seen, tightest)
         assert after.outcome == before.outcome, (cands, seen, before, after)
         if after.message.startswith('localized: confidence at least'):
             assert before.confidence >= OPTIONS.min_confidence
+        elif after.outcome == Outcome.POOR_MATCH:
+            assert after.confidence < OPTIONS.min_confidence and after.message == before.message
         else:
             assert after.confidence == pytest.approx(before.confidence) and after.message == before.message
 

@@ -42,7 +42,7 @@ from .peaks import PeakRefiner
 from .refine import refine
 from .refine import warm_up as warm_up_refine
 from .search import Resume, SearchRun, SearchStats, SettledFn, ThreadedSearch, kept_leaves, search_threads, top_in_band
-from .verdict import explained_share, judge, needed_lead
+from .verdict import confident_fit, explained_share, judge, needed_lead
 
 
 class TreeSearch(NamedTuple):
@@ -297,7 +297,7 @@ class BranchAndBoundMatcher(Matcher):
                 a, w = (yaw / d0) % n_angles, region.yaw_tolerance / d0
         opt = self.options
         return SearchSpace(self.map.width, self.map.height, n_angles, opt.keep_ratio, opt.min_confidence,
-                           opt.band_allowance, u, v, r, a, w)
+                           opt.band_allowance, confident_fit(opt.min_confidence), u, v, r, a, w)
 
     def refine_peaks(self, leaves: np.ndarray, pts, d0, points: ScanPoints) -> list[Candidate]:
         """The distinct hypotheses among the leaves (peaks.PeakRefiner), handed to on_peaks."""

@@ -188,12 +188,12 @@ def share_work(heaps: list, done: list[bool]) -> None:
 
 def kept_leaves(found: list[np.ndarray], space: SearchSpace, best: int, n_points: int) -> np.ndarray:
     """The leaves found (lists of rows u, v, a, raw optimistic score, raw evidence) whose
-    optimistic score reaches the band of the best evidence (keep_floor), once each, in
-    pose order - not the order the threads found them: equal
-    scores then pick the same peaks whatever the threads (the search may find a dive's
-    leaf again)."""
+    optimistic score reaches the band of the best evidence (keep_floor; a poor best,
+    under its floor, is kept with what reaches it), once each, in pose order - not the
+    order the threads found them: equal scores then pick the same peaks whatever the
+    threads (the search may find a dive's leaf again)."""
     leaves = np.concatenate(found) if found else np.empty((0, 5), np.int64)
-    leaves = leaves[leaves[:, 3] >= keep_floor(space, best, n_points)]
+    leaves = leaves[leaves[:, 3] >= min(keep_floor(space, best, n_points), best)]
     _, first = np.unique((leaves[:, 0] * space.map_h + leaves[:, 1]) * space.n_angles + leaves[:, 2],
                          return_index=True)
     return leaves[first]

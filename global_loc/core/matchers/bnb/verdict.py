@@ -31,12 +31,35 @@ def searched_keep(fit, keep_ratio, min_confidence, band_allowance):
     return max(keep_ratio, 1.0 - min_confidence * (1.0 - keep_ratio) / explained - band_allowance)
 
 
+# The most a peak's refined fit was seen above its leaf's score (+0.045, on a low-fit
+# changed-world peak; docs/decisions/0009): what a narrow band's resume rule allows a place
+# it did not score (matcher.resume_rule), and what a poor leaf may still gain
+REFINED_GAIN = 0.05
+
+
+def confident_fit(min_confidence: float) -> float:
+    """The lowest leaf field score whose place could be judged localized: it must explain
+    min_confidence of the scan ((fit - 0.3) / 0.3, judge's share) once refined, and a
+    refined fit lies at most REFINED_GAIN above its leaf's."""
+    return 0.3 + 0.3 * min_confidence - REFINED_GAIN
+
+
 @njit(cache=True, nogil=True)
 def keep_floor(space, best, n_points):
     """The lowest bound (raw, an integer: kernels.SearchSpace's band options) a node needs
     to be expanded, and a leaf to be kept, when the best leaf scores `best` (raw) on
-    n_points points."""
-    fit = best / (255.0 * max(n_points, 1))
+    n_points points: the band below the best - or, while the best is too poor ever to be
+    confident (below space.poor_fit, confident_fit's value; 0: no such floor), the band
+    below a leaf at poor_fit: a place under that floor can neither be confident nor be
+    the rival of an answer that is, so proving the band below a poor best would only rank
+    places that all answer `poor match`. The floor stays non-decreasing and continuous in
+    best (searched_keep's note)."""
+    norm = 255.0 * max(n_points, 1)
+    fit = best / norm
+    lowest = space.poor_fit
+    if fit < lowest:
+        return np.int64(math.ceil(searched_keep(lowest, space.keep_ratio, space.min_confidence,
+                                                space.band_allowance) * lowest * norm))
     return np.int64(math.ceil(searched_keep(fit, space.keep_ratio, space.min_confidence, space.band_allowance) * best))
 
 
@@ -51,11 +74,6 @@ def needed_lead(explained: float, options: BranchAndBoundOptions) -> float:
     where the map explains `explained` of the scan (5% at a full fit)."""
     return options.min_confidence * (1.0 - options.keep_ratio) / explained if explained > 0 else math.inf
 
-
-# The most a peak's refined fit was seen above its leaf's score (+0.045, on a low-fit
-# changed-world peak; docs/decisions/0009): what a narrow band's resume rule allows a place
-# it did not score (matcher.resume_rule)
-REFINED_GAIN = 0.05
 
 # judge's tolerance on the lead: a place with no rival seen leads by exactly the lead needed
 LEAD_TOLERANCE = 1e-9
