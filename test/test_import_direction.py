@@ -55,3 +55,28 @@ def test_the_rule_reader_sees_relative_imports():
     """So the tests above cannot pass by reading nothing."""
     names = imported(PACKAGE / 'bench' / 'suites.py')
     assert 'global_loc.io.carmen' in names and 'global_loc.bench.carmen' in names
+
+
+def test_only_io_reads_recordings():
+    """rosbags (the recording format) is read by io/ alone: the rest gets messages from it."""
+    def reads_rosbags(path: pathlib.Path) -> bool:
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ''] if isinstance(node, ast.ImportFrom) else []
+            if any(n.split('.')[0] == 'rosbags' for n in names):
+                return True
+        return False
+    readers = {str(p.relative_to(PACKAGE)) for p in SOURCES if reads_rosbags(p)}
+    assert readers and all(r.startswith('io/') for r in readers), readers
+
+
+def test_the_installed_package_is_the_runtime_alone(monkeypatch):
+    """setup.py installs what a robot runs: not the benchmark, nor the test and demo
+    harnesses, nor the repository's benchmarks/ scripts (they run from the source tree)."""
+    from setuptools._distutils.core import run_setup
+    root = PACKAGE.parent
+    monkeypatch.chdir(root)           # setup.py finds its packages from where it is run
+    packages = set(run_setup(str(root / 'setup.py'), stop_after='init').packages)
+    assert {'global_loc', 'global_loc.core', 'global_loc.ros', 'global_loc.sim', 'global_loc.io'} <= packages
+    assert not {p for p in packages if p.split('.')[:2] in (['global_loc', 'bench'], ['global_loc', 'testing'])
+                or not p.startswith('global_loc')}, packages

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .transform import Rigid2D
+from .transform import Rigid2D, rpy_of_quaternion
 
 # A scan plane whose normal is within this of vertical is level: its beams, projected to
 # the floor, are beams from one origin with their true lengths (the free-space check holds).
@@ -56,11 +56,7 @@ class Mount3D:
         if not math.isfinite(norm) or norm < 1e-9:
             raise Mount3DError(f'a mounting quaternion must be finite and non-zero, got {q.tolist()}')
         qx, qy, qz, qw = q / norm
-        # URDF's fixed-axis roll-pitch-yaw of the quaternion (pitch clamped at +-90 deg)
-        roll = math.atan2(2 * (qw * qx + qy * qz), 1 - 2 * (qx * qx + qy * qy))
-        pitch = math.asin(max(-1.0, min(1.0, 2 * (qw * qy - qz * qx))))
-        yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
-        return Mount3D(float(x), float(y), float(z), roll, pitch, yaw)
+        return Mount3D(float(x), float(y), float(z), *rpy_of_quaternion(qx, qy, qz, qw))
 
     @staticmethod
     def planar(base_T_laser: Rigid2D, z: float = 0.0) -> 'Mount3D':

@@ -17,7 +17,15 @@ import numpy as np
 def yaw_of_quaternion(q) -> float:
     """The heading (rotation about z) of a quaternion with fields x, y, z, w: a
     geometry_msgs/Quaternion of rclpy or rosbags alike."""
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    return rpy_of_quaternion(q.x, q.y, q.z, q.w)[2]
+
+
+def rpy_of_quaternion(qx: float, qy: float, qz: float, qw: float) -> tuple[float, float, float]:
+    """URDF's fixed-axis (roll, pitch, yaw) of a unit quaternion, pitch clamped at +-90 deg."""
+    roll = math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (qw * qy - qz * qx))))
+    yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    return roll, pitch, yaw
 
 
 def normalize_angle(a):

@@ -3,6 +3,7 @@ library: offline localization of a recorded run without a ROS installation; and 
 mounting on the robot base from the recording's /tf_static and /tf."""
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -16,6 +17,17 @@ from ..core.mount3d import Mount3D
 from ..core.scan import Scan
 from ..core.transform import Rigid2D
 from .messages import pose_from_msg, scan_from_msg, stamp_seconds
+
+
+@functools.cache
+def _typestore():
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def decode(raw: bytes, msgtype: str):
+    """A recorded message (its CDR bytes and type name) as a message object: rosbags' ROS 2
+    Jazzy types, read here only."""
+    return _typestore().deserialize_cdr(raw, msgtype)
 
 LASER_SCAN = 'sensor_msgs/msg/LaserScan'
 ODOMETRY = 'nav_msgs/msg/Odometry'
@@ -72,11 +84,10 @@ def read_scans(path: str, topic: str, every: int = 1) -> Iterator[tuple[int, Sca
     reader = open_bag(path)
     try:
         connections = scan_connections(reader, path, topic)
-        typestore = get_typestore(Stores.ROS2_JAZZY)
         for index, (connection, _, raw) in enumerate(reader.messages(connections=connections)):
             if index % every:
                 continue
-            yield index, scan_from_msg(typestore.deserialize_cdr(raw, connection.msgtype))
+            yield index, scan_from_msg(decode(raw, connection.msgtype))
     finally:
         reader.close()
 
@@ -89,10 +100,9 @@ def read_odometry(path: str, topic: str) -> list[tuple[float, Rigid2D]]:
         if not connections or any(c.msgtype != ODOMETRY for c in connections):
             found = ', '.join(sorted({f'{c.topic} ({c.msgtype})' for c in reader.connections})) or 'none'
             raise BagError(f'{path}: no {ODOMETRY} on {topic} (--odom-topic); the recording has: {found}')
-        typestore = get_typestore(Stores.ROS2_JAZZY)
         poses = []
         for connection, _, raw in reader.messages(connections=connections):
-            msg = typestore.deserialize_cdr(raw, connection.msgtype)
+            msg = decode(raw, connection.msgtype)
             poses.append((stamp_seconds(msg.header.stamp), pose_from_msg(msg.pose.pose)))
     finally:
         reader.close()
@@ -132,13 +142,12 @@ def read_mountings(path: str, topics: dict, base_frame: str) -> dict:
     BagError when the recording is unreadable or a topic is missing or of another type."""
     reader = open_bag(path)
     try:
-        typestore = get_typestore(Stores.ROS2_JAZZY)
         frames = {}
         for topic, msgtype in topics.items():
             first = next(reader.messages(connections=scan_connections(reader, path, topic, msgtype)), None)
             frames[topic] = None if first is None else frame_name(
-                typestore.deserialize_cdr(first[2], first[0].msgtype).header.frame_id)
-        parents, sources, moving = static_transforms(reader, typestore)
+                decode(first[2], first[0].msgtype).header.frame_id)
+        parents, sources, moving = static_transforms(reader)
     finally:
         reader.close()
     found = {}
@@ -185,7 +194,7 @@ def frame_name(frame_id: str) -> str:
     return frame_id.strip().lstrip('/')
 
 
-def static_transforms(reader: Reader, typestore) -> tuple[dict, dict, set]:
+def static_transforms(reader: Reader) -> tuple[dict, dict, set]:
     """child frame -> (parent frame, 4x4 parent_T_child) of every /tf_static transform and
     every /tf one that stays fixed; child frame -> the topic it came from; the /tf children
     whose transform moves."""
@@ -194,7 +203,7 @@ def static_transforms(reader: Reader, typestore) -> tuple[dict, dict, set]:
     connections = [c for c in reader.connections if c.topic in TF_TOPICS and c.msgtype == TF_MESSAGE]
     # (rosbags reads every topic when given no connections)
     for connection, _, raw in reader.messages(connections=connections) if connections else ():
-        for t in typestore.deserialize_cdr(raw, connection.msgtype).transforms:
+        for t in decode(raw, connection.msgtype).transforms:
             child, parent = frame_name(t.child_frame_id), frame_name(t.header.frame_id)
             r, q = t.transform.translation, t.transform.rotation
             value = (parent, np.array([r.x, r.y, r.z]), np.array([q.x, q.y, q.z, q.w]))

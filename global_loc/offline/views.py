@@ -21,8 +21,6 @@ import math
 import sys
 from dataclasses import dataclass
 
-from rosbags.typesys import Stores, get_typestore
-
 from ..core.mount3d import Mount3D, Mount3DError
 from ..core.outcome import Outcome
 from ..core.pose_history import PoseHistory
@@ -32,6 +30,7 @@ from ..io.bag import (
     LASER_SCAN,
     BagError,
     MountingNotFound,
+    decode,
     open_bag,
     read_mountings,
     read_odometry,
@@ -94,12 +93,11 @@ def bag_sensors(args) -> list[BagSensor]:
 def read_stamps(path: str, sensors: list[BagSensor]) -> dict:
     """topic -> [(stamp, connection, raw)] by stamp, for every sensor's messages."""
     reader = open_bag(path)
-    typestore = get_typestore(Stores.ROS2_JAZZY)
     try:
         connections = {s.topic: scan_connections(reader, path, s.topic, s.msgtype) for s in sensors}
         messages = {s.topic: [] for s in sensors}
         for connection, _, raw in reader.messages(connections=[c for cs in connections.values() for c in cs]):
-            msg = typestore.deserialize_cdr(raw, connection.msgtype)
+            msg = decode(raw, connection.msgtype)
             messages[connection.topic].append((stamp_seconds(msg.header.stamp), connection.msgtype, raw))
     finally:
         reader.close()
@@ -122,12 +120,12 @@ def bag_odometry(path: str, topic: str) -> tuple[PoseHistory | None, str]:
     return history, f'{topic} ({len(poses)} poses)'
 
 
-def reading_of(sensor: BagSensor, message, typestore) -> SensorReading:
+def reading_of(sensor: BagSensor, message) -> SensorReading:
     """One recorded message as a SensorReading; ViewError (the reason) when it is unusable."""
     if sensor.mount is None:
         raise ViewError(f'no mounting: {sensor.mounting["because"]}, and no --mount {sensor.topic} X Y Z ROLL '
                         'PITCH YAW')
-    msg = typestore.deserialize_cdr(message[2], message[1])
+    msg = decode(message[2], message[1])
     return reading_from_msg(sensor.topic, sensor.msgtype == LASER_SCAN, msg, lambda: sensor.mount)
 
 
@@ -135,7 +133,6 @@ def views(sensors: list[BagSensor], messages: dict, every: int, config: ViewConf
     """(where, View or the ViewError) per every-th message of the first sensor."""
     if every < 1:
         raise BagError(f'--every must be at least 1, got {every}')
-    typestore = get_typestore(Stores.ROS2_JAZZY)
     stamps = {topic: [m[0] for m in found] for topic, found in messages.items()}
     first = sensors[0].topic
     for index, start in enumerate(messages[first]):
@@ -150,7 +147,7 @@ def views(sensors: list[BagSensor], messages: dict, every: int, config: ViewConf
                 reasons[sensor.topic] = 'silent: no message by the window\'s end'
                 continue
             try:
-                readings[sensor.topic] = reading_of(sensor, found[at], typestore)
+                readings[sensor.topic] = reading_of(sensor, found[at])
             except (ScanError, Mount3DError) as e:       # ViewError, ScanError, MountError
                 reasons[sensor.topic] = f'{type(e).__name__}: {e}'
         where = {'index': index, 'stamp': round(start[0], 9)}
