@@ -7,7 +7,10 @@ package_name = 'global_loc'
 setup(
     name=package_name,
     version='0.1.0',
-    packages=find_packages(exclude=['test', 'test.*']),
+    # the runtime only: the benchmark and the test and demo harnesses run from the source tree
+    packages=find_packages(include=['global_loc', 'global_loc.*'],
+                           exclude=['global_loc.bench', 'global_loc.bench.*',
+                                    'global_loc.testing', 'global_loc.testing.*']),
     package_data={'global_loc.sim': ['*.urdf']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),

@@ -29,7 +29,7 @@ BENCHMARKS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.pat
 RESULTS = os.path.join(BENCHMARKS, 'results')
 
 
-def method_table(rows, label_fn, label_name, methods, baseline_rows=None) -> str:
+def method_table(rows, label_fn, label_name, methods) -> str:
     """One line per (label, method): success at both criteria, times, speed vs baseline."""
     lines = [f'| {label_name} | method | n | success 0.2 m/5° | success 0.5 m/10° | marked success but wrong '
              f'| median time [s] | p95 time [s] | time / baseline |',

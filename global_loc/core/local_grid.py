@@ -3,7 +3,7 @@
 The local map is an image at the global map's resolution with the laser at its centre
 and side 2 x range_max. Obstacles are 255 on 0 — the inverse of the thesis's black-on-
 white drawings, which is the polarity matchTemplate and feature detectors want against
-`OccupancyMap.obstacle_image()`. Hence the thesis's *opening* of the black-on-white image
+the map's wall image (`OccupancyMap.surface_image()`). Hence the thesis's *opening* of the black-on-white image
 (which grows black points and joins a wall's dotted returns into a line, its fig. 2.5)
 is here a morphological *closing* of the obstacle pixels: the same operation, named here
 for what it does (`closing_kernel`; the ROS parameter and the CLI flag keep the thesis's

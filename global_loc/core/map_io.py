@@ -114,10 +114,6 @@ class OccupancyMap:
             return np.full(self.occupancy.shape, 1e6, np.float32)
         return cv2.distanceTransform((~target).astype(np.uint8), cv2.DIST_L2, 5)
 
-    def obstacle_image(self) -> np.ndarray:
-        """uint8 image, 255 on occupied cells and 0 elsewhere (the matchers' polarity)."""
-        return np.where(self.occupied, 255, 0).astype(np.uint8)
-
     def surface_image(self) -> np.ndarray:
         """uint8 image, 255 on occupied cells that touch a free cell (8-neighbourhood):
         the wall surfaces a laser can hit. A scan's local map shows one-cell surfaces, not
