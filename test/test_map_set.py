@@ -113,3 +113,41 @@ def test_the_time_limit_is_one_for_the_goal_not_one_per_map(office_and_mirror):
     assert result.outcome == Outcome.SEARCH_INCOMPLETE, result.message
     assert 'search limit' in result.message, result.message
     assert result.time_s < 2.5 * limit, result.time_s      # four limits would be 2 s and more
+
+
+def coarser(occupancy_map, name: str):
+    """The map drawn again at twice its cell size (a cell occupied where any of its four was,
+    free where all were): the same building mapped at another resolution."""
+    from global_loc.core.transform import Rigid2D
+    g = occupancy_map.occupancy
+    h, w = g.shape[0] // 2 * 2, g.shape[1] // 2 * 2
+    blocks = g[:h, :w].reshape(h // 2, 2, w // 2, 2)
+    out = np.full((h // 2, w // 2), -1, np.int8)
+    out[(blocks == 0).all(axis=(1, 3))] = 0
+    out[(blocks >= 65).any(axis=(1, 3))] = 100
+    o = occupancy_map.origin       # the rows left out were the bottom ones: the corner moves up
+    return make_map(out, 2 * occupancy_map.resolution, Rigid2D(o.x, o.y + (g.shape[0] - h) * occupancy_map.resolution,
+                                                            o.yaw), name)
+
+
+def test_identical_floors_at_different_resolutions_are_ambiguous_and_other_floors_still_decide(office_and_mirror):
+    """A floor mapped at 0.10 m beside the same floor at 0.05 m: the coarser map's field is
+    twice as wide in metres, so by their own scores one copy can lead the other; compared
+    on a common footing (MapSet.common_fits) no scan is answered on either. A different
+    building at the coarser resolution is still told apart."""
+    office, mirror, _ = office_and_mirror
+    same = MapSet({'floor_1': office, 'floor_2': Localizer(coarser(office.map, 'floor_2'))})
+    other = MapSet({'floor_1': office, 'mirror': Localizer(coarser(mirror.map, 'mirror'))})
+    rng = np.random.default_rng(7)
+    told_apart = 0
+    for truth in sample_free_poses(office.map, 12, rng, clearance=0.4):
+        scan = simulate_scan(office.map, truth, 270, 541, 20.0, noise_std=0.01, dropout=0.02, rng=rng)
+        result = same.localize(scan)
+        assert not result.success, (truth, result.map, result.message)
+        assert {h.map for h in result.hypotheses} == {'floor_1', 'floor_2'} or result.outcome != Outcome.AMBIGUOUS
+        decided = other.localize(scan)
+        assert not decided.success or decided.map == 'floor_1', (truth, decided.message)
+        if decided.success:
+            assert_pose_near(decided.pose, truth)
+            told_apart += 1
+    assert told_apart >= 8

@@ -21,6 +21,9 @@ import os
 import time
 from typing import Optional, Sequence
 
+import numpy as np
+from scipy.spatial import cKDTree
+
 from .files import UnreadableFile, brief, read_yaml_file
 from .localizer import LocalizationResult, Localizer
 from .matchers import TRACKER_METHOD, resolve_method
@@ -123,6 +126,7 @@ class MapSet:
         if not localizers:
             raise MapSetError('a map set needs at least one map')
         self.localizers = dict(localizers)
+        self._walls = {}      # map name -> its occupied cells' KD-tree, built when first needed (common_fits)
         self.served = served or next(iter(self.localizers))
         if self.served not in self.localizers:
             raise MapSetError(f'the served map {self.served} is not in the set (maps: {", ".join(self.names)})')
@@ -185,7 +189,27 @@ class MapSet:
                 points, method, angle_step_deg, part, base_T_laser, t0=t0, region=region, incumbent=best_leaf), name)
             best_leaf = max(best_leaf, leaf_of(results[name]))
         return across({n: results[n] for n in names}, {n: self.localizers[n].tracker(method) for n in names},
-                      time.perf_counter() - t0)
+                      time.perf_counter() - t0, self.common_fits(points, results, base_T_laser))
+
+    def common_fits(self, points, results: dict[str, LocalizationResult], base_T_laser) -> Optional[dict]:
+        """Each posed map's fit of the scan on a common footing, when the maps' resolutions
+        differ (None when they agree: their scores already share one). A fit's field is
+        sigma_cells wide in cells, so a map at 0.10 m explains the same returns more loosely
+        than one at 0.05 m: the same floor mapped twice would win on its coarser copy. Here
+        every map's best pose is scored with one field width in metres, the widest of the
+        maps' (common_fit)."""
+        posed = {n: r for n, r in results.items() if r.pose is not None and math.isfinite(r.score)}
+        if len({self.localizers[n].map.resolution for n in posed}) < 2:
+            return None
+        sigma_m = max(self.localizers[n].config.bnb.sigma_cells * self.localizers[n].map.resolution for n in posed)
+        fits = {}
+        for name, result in posed.items():
+            loc = self.localizers[name]
+            if name not in self._walls:
+                self._walls[name] = wall_tree(loc.map)
+            laser = result.pose * (base_T_laser or loc.config.base_T_laser)
+            fits[name] = common_fit(self._walls[name], laser.apply(points.points), sigma_m, loc.map.resolution)
+        return fits
 
     def raced_leaves(self, points, names: list[str], base_T_laser, region) -> dict[str, float]:
         """The best leaf bnb's tree search finds on each map, in rounds: every map not yet done
@@ -205,6 +229,26 @@ class MapSet:
         return leaf
 
 
+def wall_tree(occupancy_map) -> Optional[cKDTree]:
+    """A KD-tree of the map's occupied cell centres in the world (None: no occupied cell)."""
+    rows, cols = np.nonzero(occupancy_map.occupied)
+    if not len(rows):
+        return None
+    return cKDTree(occupancy_map.frame.pixel_to_world(np.stack([cols, rows], axis=1)))
+
+
+def common_fit(walls: Optional[cKDTree], world_points: np.ndarray, sigma_m: float, resolution: float) -> float:
+    """The mean over the scan's returns of exp(-d^2 / 2 sigma^2), d the distance in metres
+    from a return to the nearest wall cell (to its edge: a cell's centre lies half a cell
+    from the surface the laser saw): a fit whose width does not depend on the map's
+    resolution."""
+    if walls is None or not len(world_points):
+        return 0.0
+    d, _ = walls.query(world_points, distance_upper_bound=4.0 * sigma_m + resolution)
+    d = np.clip(d - 0.5 * resolution, 0.0, 4.0 * sigma_m)
+    return float(np.mean(np.exp(-0.5 * (d / sigma_m) ** 2)))
+
+
 def leaf_of(result: Optional[LocalizationResult]) -> float:
     """The best leaf score a result's bnb search found (0 without one)."""
     stats = getattr(result, 'search_stats', None)
@@ -216,13 +260,17 @@ def tagged(result: LocalizationResult, name: str) -> LocalizationResult:
     return dataclasses.replace(result, map=name, hypotheses=hyps)
 
 
-def across(results: dict[str, LocalizationResult], trackers: dict, time_s: float) -> LocalizationResult:
+def across(results: dict[str, LocalizationResult], trackers: dict, time_s: float,
+           fits: Optional[dict] = None) -> LocalizationResult:
     """One answer from each map's: the best map's, kept confident only when no other map's
-    best place comes within the lead it needs; the hypotheses of every map, best first."""
+    best place comes within the lead it needs; the hypotheses of every map, best first.
+    `fits`: each posed map's fit on a common footing (maps of different resolutions,
+    MapSet.common_fits), compared instead of the maps' own scores."""
     if len(results) == 1:
         return dataclasses.replace(next(iter(results.values())), time_s=time_s)
+    fit = (lambda r: fits[r.map]) if fits else (lambda r: r.score)
     posed = sorted((r for r in results.values() if r.pose is not None and math.isfinite(r.score)),
-                   key=lambda r: -r.score)
+                   key=lambda r: -fit(r))
     hyps = sorted((h for r in results.values() for h in r.hypotheses), key=lambda h: -h.score)
     if not posed:
         return no_pose(results, time_s)
@@ -235,11 +283,11 @@ def across(results: dict[str, LocalizationResult], trackers: dict, time_s: float
         return dataclasses.replace(out, outcome=Outcome.SEARCH_INCOMPLETE, confidence=0.0,
                                    message=f'search incomplete: localized on map {best.map}, but the search on map '
                                            f'{", ".join(stopped)} stopped before it could rule a better place out')
-    rival = max((r.score for r in posed[1:]), default=0.0)
-    need = trackers[best.map].lead_needed(best.score)
-    lead = (best.score - rival) / best.score if best.score > 0 else 0.0
+    rival = max((fit(r) for r in posed[1:]), default=0.0)
+    need = trackers[best.map].lead_needed(fit(best))
+    lead = (fit(best) - rival) / fit(best) if fit(best) > 0 else 0.0
     if rival > 0 and lead < need:
-        other = next(r.map for r in posed[1:] if r.score == rival)
+        other = next(r.map for r in posed[1:] if fit(r) == rival)
         return dataclasses.replace(out, outcome=Outcome.AMBIGUOUS,
                                    confidence=min(best.confidence, best.confidence * max(lead, 0.0) / need),
                                    message=f'ambiguous between maps: the best place of map {other} lies '
