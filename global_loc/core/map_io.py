@@ -211,6 +211,7 @@ class _MapYaml:
 
 def _read_map_yaml(path: str) -> _MapYaml:
     """The YAML's parameters, each checked, the image's path resolved against the YAML's folder."""
+    check_regular_file(path, path, 'map YAML')
     try:
         doc = read_yaml_file(path)
     except UnreadableFile as e:
