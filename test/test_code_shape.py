@@ -116,3 +116,12 @@ def test_every_decision_record_the_repository_cites_exists():
     cited = {(p.name, n) for p in files for n in re.findall(r'decisions/(\d{4})', p.read_text())}
     assert len(records) >= 10 and len(cited) >= 4
     assert not [c for c in cited if c[1] not in records], sorted(cited)
+
+
+def test_a_request_reads_the_servers_configuration_once():
+    """docs/ARCHITECTURE.md: a request reads one consistent snapshot - at admission (the
+    request path's Job), and `served_map` again just before publishing (the one live read:
+    map_server may have switched maps during the search)."""
+    text = (PACKAGE / 'ros' / 'request_path.py').read_text()
+    reads = re.findall(r'self\.c\.config\(\)(\[\'\w+\'\])?', text)
+    assert sorted(reads) == ['', "['served_map']"], reads

@@ -66,6 +66,17 @@ class Asker:
     feedback: Callable[..., None] = lambda *a: None
 
 
+@dataclass(frozen=True)
+class Job:
+    """One admitted request as the path carries it: what was asked, the server's configuration
+    as it was at admission (read once: the request sees one consistent snapshot), who
+    asked, and when it started (time.monotonic)."""
+    request: Request
+    config: object              # ros.parameters.ServerConfig
+    asker: Asker
+    start: float
+
+
 class RequestPath:
     def __init__(self, c: Collaborators):
         self.c = c
@@ -95,8 +106,10 @@ class RequestPath:
         def gone() -> bool:       # the configuration this request was admitted under has ended
             return self.stopping.is_set() or self.epoch != epoch
         try:
-            request = make_request(asked, self.c.config().request_defaults())
-            return self.run(request, Asker(lambda: asker.cancelled() or gone(), asker.feedback))
+            config = self.c.config()       # one snapshot for the request: a parameter set meanwhile applies to the next
+            request = make_request(asked, config.request_defaults())
+            return self.run(Job(request, config, Asker(lambda: asker.cancelled() or gone(), asker.feedback),
+                                time.monotonic()))
         except RequestError as e:
             return self.end_early(Outcome.BAD_GOAL, f'bad request: {e}')
         except CanceledError:
@@ -123,26 +136,25 @@ class RequestPath:
         return ended_result(outcome, message)
 
     # ---- localize ---------------------------------------------------------------------
-    def run(self, request: Request, asker: Asker) -> Localize.Result:
-        cancelled = asker.cancelled
-        start = time.monotonic()
+    def run(self, job: 'Job') -> Localize.Result:
+        request, asker, cancelled = job.request, job.asker, job.asker.cancelled
         maps = self.c.maps.wait_current(request.scan_timeout_s, cancelled)   # a newer map may be building
         if maps.built is None or not self.c.maps.is_current(maps.generation):
             return self.end_early(Outcome.NO_MAP, maps.error or 'a newer map is still being prepared; retry')
-        localizer = maps.built.reconfigured(self.c.config().localizer)     # a MapSet (one map or several)
+        localizer = maps.built.reconfigured(job.config.localizer)     # a MapSet (one map or several)
         try:
             localizer.matcher(request.method)       # prepared with the map, or refused now: never built here
             localizer.searched(request.maps)
         except (MethodError, MapSetError) as e:
             return self.end_early(Outcome.BAD_GOAL, f'bad request: {e}')
-        newest = self.wait_for_view(request, start, asker)
+        newest = self.wait_for_view(job)
         if newest is None:
             return self.end_early(Outcome.NO_SCAN, f'no {self.wanted()} within {seconds(request.scan_timeout_s)} s')
         try:
-            view, messages = make_view(self.c.sensors, newest, start, self.c.mount, self.c.odometry,
-                                       self.c.config().view)
+            view, messages = make_view(self.c.sensors, newest, job.start, self.c.mount, self.c.odometry,
+                                       job.config.view)
             self.log_view(view, messages)
-            result, not_confirmed = self.from_stored_pose(request, localizer, view, messages)
+            result, not_confirmed = self.from_stored_pose(job, localizer, view, messages)
             if result is None:
                 result = localizer.localize_points(view.points, request.method, request.angle_step_deg,
                                                    self.progress(asker), base_T_laser=view.base_T_laser,
@@ -156,31 +168,30 @@ class RequestPath:
         reference = max(messages.values(), key=lambda m: stamp_seconds(m.header.stamp))
         shown = (view.points, view.base_T_laser, reference)
         if result.outcome == Outcome.AMBIGUOUS and request.resolve_by_motion_s > 0:
-            result, shown = self.resolve_by_motion(result, messages, request, localizer, asker, shown)
+            result, shown = self.resolve_by_motion(result, messages, job, localizer, shown)
         specs = self.c.sensors.specs
         if len(specs) > 1 or specs[0].kind != 'scan':     # one laser alone: its messages as they always were
             result = dataclasses.replace(result, message=f'{result.message} [{view.summary()}]')
         if cancelled():     # asked to end, or its configuration ended, after the search's last step
             raise CanceledError()
-        return self.publish(request, result, shown, maps.generation, localizer, start)
+        return self.publish(job, result, shown, maps.generation, localizer)
 
-    def from_stored_pose(self, request: Request, map_set: MapSet, view, messages: dict) -> tuple:
+    def from_stored_pose(self, job: 'Job', map_set: MapSet, view, messages: dict) -> tuple:
         """(the stored pose confirmed by the view, '') when the request asks for it and the file
         confirms; (None, why not) when it asks and it does not; (None, '') otherwise."""
-        if not request.from_stored_pose:
+        if not job.request.from_stored_pose:
             return None, ''
         pose_file = self.c.pose_file()
         if pose_file is None:
             return None, 'no stored_pose_file is set'
         stamp = max(stamp_seconds(m.header.stamp) for m in messages.values())
         result, why = pose_file.confirm(map_set, view.points, view.base_T_laser, stamp,
-                                        self.c.config()['stored_pose_max_age_s'])
+                                        job.config['stored_pose_max_age_s'])
         self.c.logger.info('the stored pose is confirmed' if result is not None else
                            f'the stored pose is not confirmed: {why}; searching in full')
         return result, why
 
-    def resolve_by_motion(self, result, messages: dict, request: Request, localizer, asker: Asker,
-                          shown: tuple) -> tuple:
+    def resolve_by_motion(self, result, messages: dict, job: 'Job', localizer, shown: tuple) -> tuple:
         """Followed over the primary laser's scans (the watch's laser); (result, what to show)."""
         primary = next((s for s in self.c.sensors.specs if s.primary), None)
         if primary is None or primary.topic not in messages:
@@ -198,7 +209,8 @@ class RequestPath:
         except ScanError as e:
             return dataclasses.replace(result, message=f'{result.message} (cannot resolve by motion: {e})'), shown
         result, last = resolve_by_motion(self.c.motion(), MotionStart(result, msg, mount.base_T_laser, localizer),
-                                         request, self.c.config()['rotate_speed'], asker.cancelled, asker.feedback)
+                                         job.request, job.config['rotate_speed'], job.asker.cancelled,
+                                         job.asker.feedback)
         result = tagged(result, on_map)         # the follower's answer is on the map it followed on
         if last is msg:
             return result, shown
@@ -210,11 +222,12 @@ class RequestPath:
         what = 'scan' if all(s.kind == 'scan' for s in specs) else 'sensor message'
         return f'{what} on {", ".join(s.topic for s in specs)}'
 
-    def wait_for_view(self, request: Request, start: float, asker: Asker):
+    def wait_for_view(self, job: 'Job'):
+        request, asker = job.request, job.asker
         self.c.logger.info(f'localizing ({request.origin}): method {request.method}, waiting up to '
                            f'{seconds(request.scan_timeout_s)} s for a {self.wanted()}')
         asker.feedback(0.0, Stage.WAITING_FOR_SCAN, 0.0)
-        newest = self.c.sensors.wait(start, request.scan_timeout_s, self.c.config().view.merge_window_s,
+        newest = self.c.sensors.wait(job.start, request.scan_timeout_s, job.config.view.merge_window_s,
                                      asker.cancelled)
         if newest is not None:
             asker.feedback(0.05, Stage.PREPARING_SCAN, 0.0)   # local map or points, per method
@@ -241,18 +254,19 @@ class RequestPath:
         return report
 
     # ---- publish ------------------------------------------------------------------------
-    def publish(self, request: Request, result, shown: tuple, generation: int, map_set: MapSet,
-                start: float) -> Localize.Result:
+    def publish(self, job: 'Job', result, shown: tuple, generation: int, map_set: MapSet) -> Localize.Result:
         """The action result; the pose on /initialpose when it is confident (or asked for
         anyway), its map is still the newest received and it is on the served map (the map
         /map serves: a pose on another floor would put AMCL on the wrong map). `shown`:
         (points, base_T_laser, message) the pose is of - the view's newest, or
         resolve-by-motion's last scan. A confident answer's map goes on the current-map topic."""
-        config = self.c.config()
-        served = config['served_map'] or map_set.served      # live: set when map_server switches maps
+        request, config = job.request, job.config
+        # the one parameter read again, not from the snapshot: map_server may have switched maps
+        # during the search, and a pose for the map it served before must not reach AMCL now
+        served = self.c.config()['served_map'] or map_set.served
         occupancy_map = map_set.localizers.get(result.map, map_set.localizers[served]).map
         points, base_T_laser, msg = shown
-        out = result_to_msg(result, config['map_frame'], msg.header.stamp, time.monotonic() - start)
+        out = result_to_msg(result, config['map_frame'], msg.header.stamp, time.monotonic() - job.start)
         out.scan_stamp = msg.header.stamp
         out.scan_age_s = self.scan_age(msg)
         self.c.show(result, points, base_T_laser, msg.header.stamp, occupancy_map)
