@@ -90,8 +90,13 @@ def load_yaml_text(text: str):
     """The document of a YAML text without aliases; UnreadableFile when it does not parse."""
     try:
         return yaml.load(text, Loader=_NoAliasLoader)     # noqa: S506 - a SafeLoader subclass
+    except yaml.MarkedYAMLError as e:      # the problem and where, on one line (not the echoed text)
+        mark = e.problem_mark or e.context_mark
+        where = f' (line {mark.line + 1}, column {mark.column + 1})' if mark is not None else ''
+        raise UnreadableFile(f'is not valid YAML: {str(e.problem or e.context)[:200]}{where}') from None
     except yaml.YAMLError as e:
-        raise UnreadableFile(f'is not valid YAML: {str(e)[:300]}') from None
+        first = str(e).splitlines()[0][:200] if str(e) else type(e).__name__
+        raise UnreadableFile(f'is not valid YAML: {first}') from None
     except RecursionError:
         raise UnreadableFile('is not valid YAML: nested too deep') from None
 
