@@ -24,7 +24,15 @@ one after another, while the scenario injects its fault:
 - params_mid_goal: three /global_loc_server/set_parameters calls mid-goal, live values and
   refused ones;
 - client_killed: `test_global_loc` SIGINT-ed and SIGKILL-ed mid-goal (its process group,
-  as a terminal does), then the goal loop.
+  as a terminal does), then the goal loop;
+- stored_pose_unreadable: the stored-pose file a FIFO or deeply nested brackets: the
+  start-up searches in full, goals are served;
+- stored_pose_prior: goals with a search prior around the robot (their answers must not be
+  stored), then the robot carried elsewhere and the server restarted (the stored pose must
+  not be confirmed there: a wrong /initialpose would count);
+- hostile_map: the map YAML a "billion laughs" file: the map is refused at once, goals are
+  refused, then the server cleaned up, map_yaml set to the office, configured and activated
+  again, and it localizes.
 
 Per run: goals sent and answered; /initialpose messages and the wrong ones (farther than
 core.transform.pose_correct from the simulator's /sim/true_pose at the pose's stamp, the
@@ -215,13 +223,92 @@ def client_killed(run: Run) -> None:
     time.sleep(6.0)
 
 
+def stored_pose_unreadable(run: Run) -> None:
+    """The stored-pose file is a FIFO (reading it would block the start-up and every goal
+    after it) or a file of deeply nested brackets (a parser's recursion): the start-up must
+    search in full and the goals be served."""
+    path = os.path.join(run.log_dir, 'stored_pose.json')
+    if os.path.lexists(path):      # a log folder of an earlier benchmark run
+        os.unlink(path)
+    if run.seed % 2:       # the runs alternate between the two kinds
+        os.mkfifo(path)
+        kind = 'a FIFO'
+    else:
+        with open(path, 'w') as f:
+            f.write('[' * 100_000 + ']' * 100_000)
+        kind = 'nested brackets'
+    run.sim()
+    run.server(f'stored_pose_file:={path}')
+    run.mark(f'server started with a stored-pose file of {kind}')
+    run.loop(BNB)
+    time.sleep(8.0)
+
+
+def stored_pose_prior(run: Run) -> None:
+    """Goals with a search prior around the robot are confident within the prior only: the
+    stored pose must stay the start-up's (a full search). The robot is then carried to
+    another place and the server restarted: the stored pose must not be confirmed there."""
+    from geometry_msgs.msg import Pose2D
+    path = os.path.join(run.log_dir, 'stored_pose.json')
+    if os.path.lexists(path):
+        os.unlink(path)
+    here, there = (POSES[int(i)] for i in run.rng.choice(len(POSES), 2, replace=False))
+    run.sim(here)
+    server = run.server(f'stored_pose_file:={path}')
+    run.until(lambda: 'start-up: ' in server.output(), 30.0)
+    kept = open(path).read() if os.path.exists(path) else None
+    prior = {'method': 'bnb', 'search_center': Pose2D(x=here.x, y=here.y, theta=here.yaw), 'search_radius_m': 1.5}
+    for _ in range(3):
+        run.goal(prior)
+    if (open(path).read() if os.path.exists(path) else None) != kept:
+        run.h.wrong.append({'what': 'an answer confident only within a search prior was stored'})
+    run.stop('server')
+    run.stop('sim')
+    run.sim(there)
+    server = run.server(f'stored_pose_file:={path}')
+    run.until(lambda: 'start-up: ' in server.output(), 30.0)
+    run.mark('carried to another place while the server was down, server restarted')
+    time.sleep(2.0)      # the harness's action client rediscovers the new server (it does not resend)
+    run.loop(BNB)
+    time.sleep(6.0)
+
+
+def hostile_map(run: Run) -> None:
+    """The map YAML is a "billion laughs" file (a few hundred bytes of nested aliases): the
+    map must be refused at once, naming the file, with goals refused; map_yaml set to the
+    office and the server configured again (deactivate, cleanup, configure, activate), it
+    localizes."""
+    from lifecycle_msgs.msg import Transition as T
+    path = os.path.join(run.log_dir, 'laughs.yaml')
+    lines = ['a0: &a0 "lol"'] + [f'a{i}: &a{i} [{", ".join([f"*a{i - 1}"] * 10)}]' for i in range(1, 10)]
+    with open(path, 'w') as f:
+        f.write('\n'.join(lines + ['image: *a9', 'resolution: 0.05', 'origin: [0, 0, 0]',
+                                   'occupied_thresh: 0.65', 'free_thresh: 0.2', '']))
+    run.sim()
+    server = run.server(f'map_yaml:={path}')
+    if not run.until(lambda: 'map not loaded' in server.output(), 10.0):
+        run.hangs.append('a billion-laughs map YAML: no "map not loaded" within 10 s')
+    run.loop(BNB)
+    run.sleep_between(1.0, 2.0)
+    for step in (T.TRANSITION_DEACTIVATE, T.TRANSITION_CLEANUP):      # map_yaml is read at configure
+        run.transition(step)
+    results = run.h.set_parameters({'map_yaml': default_map_yaml()})
+    if not results or not all(r.successful for r in results):
+        run.notes.append(f'map_yaml not set: {results}')
+    for step in (T.TRANSITION_CONFIGURE, T.TRANSITION_ACTIVATE):
+        run.transition(step)
+    run.mark('cleaned up, map_yaml set to the office, configured and activated')
+    time.sleep(6.0)
+
+
 SCENARIOS = {'map_republished': map_republished, 'localizer_late': localizer_late,
              'localizer_drops': localizer_drops, 'laser_late': laser_late,
              'laser_stops': lambda run: laser_stopped(run, signal.SIGTERM),
              'sim_killed': lambda run: laser_stopped(run, signal.SIGKILL),
              'lifecycle_mid_goal': lifecycle_mid_goal, 'lifecycle_by_id': lifecycle_by_id,
              'unprepared_method': unprepared_method, 'params_mid_goal': params_mid_goal,
-             'client_killed': client_killed}
+             'client_killed': client_killed, 'stored_pose_unreadable': stored_pose_unreadable,
+             'stored_pose_prior': stored_pose_prior, 'hostile_map': hostile_map}
 
 
 def fault_rows(runs: int, seed: int, log_dir: str, scenarios=tuple(SCENARIOS)) -> list[dict]:
