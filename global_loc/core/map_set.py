@@ -96,7 +96,7 @@ def _map_set_entry(item, path: str, folder: str) -> str:
     """One entry of map-set file `path` as PATH or NAME=PATH, its path resolved against `folder`."""
     if isinstance(item, dict) and len(item) == 1:
         (name, target), = item.items()
-        name, target = str(name), target
+        name = str(name)
         if '=' in name or '/' in name or not name:
             raise MapSetError(f'map-set file {path}: the map name {brief(name)} cannot be empty or hold "=" or "/"')
     elif isinstance(item, str) and item:
@@ -136,8 +136,11 @@ class MapSet:
         return list(self.localizers)
 
     def reconfigured(self, config) -> 'MapSet':
-        """Every map with `config` (Localizer.reconfigured: the matchers shared)."""
-        return MapSet({n: loc.reconfigured(config) for n, loc in self.localizers.items()}, self.served)
+        """Every map with `config` (Localizer.reconfigured: the matchers shared, and the maps'
+        wall trees: the server reconfigures the set for every request)."""
+        out = MapSet({n: loc.reconfigured(config) for n, loc in self.localizers.items()}, self.served)
+        out._walls = self._walls
+        return out
 
     def matcher(self, method: str):
         """The method's matcher on every map (MethodError where one lacks it); the served map's."""
