@@ -297,7 +297,7 @@ class Localizer:
         laser_T_base = base_T_laser.inverse()
         # the time limit counts from t0 (a map set's goal: from its start, shared by every map)
         options = dataclasses.replace(options, incumbent=incumbent, max_nodes=max_nodes,
-                                      max_search_s=max(cfg.max_search_s - (time.perf_counter() - t0), 0.0))
+                                      spent_s=time.perf_counter() - t0)
         if not self._has_obstacles:
             return LocalizationResult(Outcome.NO_MATCH, f'the map {self.map.source} has no obstacles (no occupied '
                                                         f'cell) to match a scan against', matcher.name,

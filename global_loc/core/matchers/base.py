@@ -107,6 +107,9 @@ class MatchOptions:
     # Seconds of search after which a matcher stops and answers with what it explored
     # (then never a success: a better place may lie in what it did not reach).
     max_search_s: float = math.inf
+    # Seconds of that limit already spent before this match (a map set's earlier maps): one
+    # limit holds for the whole goal, and the stop message still names the goal's limit.
+    spent_s: float = 0.0
     # A fit (bnb's field score, 0..1) some place is known to reach: an exhaustive search may
     # prune below its band from the start and return only the places that come that close -
     # a check that no place beats a known one costs a fraction of finding the best.

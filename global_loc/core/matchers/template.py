@@ -47,7 +47,7 @@ class RotatedTemplateMatcher(Matcher):
         angles = self.angles(options)
         laser = np.array([*local.laser_px, 1.0])
         candidates, best = [], -np.inf
-        deadline = time.monotonic() + options.max_search_s
+        deadline = time.monotonic() + options.max_search_s - options.spent_s
         stopped = ''
         for i, angle in enumerate(angles):
             if time.monotonic() > deadline:

@@ -202,7 +202,7 @@ class BranchAndBoundMatcher(Matcher):
         """Steps 1 and 2 of a match: the top-level nodes and the branch and bound; None when
         the scan has too few points or the search space no free block."""
         opt = self.options
-        deadline = time.monotonic() + options.max_search_s
+        deadline = time.monotonic() + options.max_search_s - options.spent_s
         max_nodes = options.max_nodes or opt.max_nodes
         pts = self.prepare(points.points)
         if len(pts) < 3:
