@@ -191,3 +191,31 @@ def test_the_default_band_sees_a_rival_that_outranks_a_best_whose_beams_pass_thr
         keep = searched_keep(best_leaf, opts.keep_ratio, opts.min_confidence, opts.band_allowance)
         seen = [c for c, leaf in ((right, true_leaf), (wrong, best_leaf)) if leaf >= keep * best_leaf]
         assert judge(sorted(seen, key=lambda c: -c.score), opts).outcome == outcome
+
+
+def lifted(x, fit, optimistic, see_through=0.0, unknown=0.3):
+    """Another place whose returns on unknown cells may have hit walls the map lacks."""
+    c = place(x, fit, see_through)
+    c.optimistic, c.unknown = optimistic, unknown
+    return c
+
+
+def test_a_place_the_map_cannot_rule_out_is_a_rival_for_what_it_does_not_say():
+    """The true place of a partly unmapped room (0.6 on evidence, 0.9 with its returns on
+    unknown cells taken as possibly explained) against its fully mapped twin (0.9): ambiguous,
+    saying why; with nothing credited it would trail by a third and the twin be confident."""
+    verdict = judge([place(0, 0.9), lifted(5, 0.6, 0.9)], OPTIONS)
+    assert verdict.outcome == Outcome.AMBIGUOUS and 'on cells the map does not know' in verdict.message, verdict
+    assert judge([place(0, 0.9), place(5, 0.6)], OPTIONS).success
+
+
+def test_what_the_map_does_say_still_counts_against_a_place_lifted_by_unknown_cells():
+    """A place lifted above the best by unknown cells (0.916 against 0.912) whose beams
+    cross mapped walls for 13% (the best: 7%) ranks 0.80 against 0.85: the lead a confident
+    answer needs, not a tie (a real log's scan, intel, whose rival looks into rooms never
+    mapped through walls the map has)."""
+    best = place(0, 0.912, see_through=0.072)
+    rival = lifted(4, 0.749, 0.916, see_through=0.128, unknown=0.1)
+    assert judge([best, rival], OPTIONS).success
+    crossing_less = lifted(4, 0.749, 0.916, see_through=0.07, unknown=0.1)
+    assert judge([best, crossing_less], OPTIONS).outcome == Outcome.AMBIGUOUS

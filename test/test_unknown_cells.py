@@ -1,8 +1,9 @@
-"""Unknown is not evidence (bnb.unknown_credit, opt-in): a return landing on a cell the map
-does not know neither explains nor contradicts a place (docs/METHOD.md, "Unknown cells").
-A place whose nearby walls were never mapped stays a rival of its fully mapped twin, so
-the twin is never answered confidently; where the map knows every cell a scan reaches,
-nothing changes. The twin is named whatever the option."""
+"""Unknown is not evidence (bnb.unknown_credit, on by default): a return landing on a cell
+the map does not know neither explains nor contradicts a place (docs/METHOD.md, "Unknown
+cells"). A place whose nearby walls were never mapped stays a rival of its fully mapped
+twin, so the twin is never answered confidently; where the map knows every cell a scan
+reaches, nothing changes. The twin is named whatever the option; with no credit (0) unknown
+counts against a place as free space does, and the twin can win."""
 import math
 
 import numpy as np
@@ -29,7 +30,7 @@ def half_turn_symmetric_hall():
     return grid_map(grid)
 
 
-CREDITED = LocalizerConfig(bnb=BranchAndBoundOptions(unknown_credit=1.0 / 3.0))
+UNCREDITED = LocalizerConfig(bnb=BranchAndBoundOptions(unknown_credit=0.0))
 
 
 def twin_of(pose: Rigid2D) -> Rigid2D:
@@ -50,12 +51,21 @@ def test_a_place_whose_nearby_walls_are_unknown_is_never_answered_at_its_twin(po
     assert any(pose_correct(h.pose, twin_of(pose)) for h in full.hypotheses)
     assert 'its twin' in full.message, full.message
     cut = unmapped_around(hall, pose, radius)           # the true place's nearby walls never mapped
-    assert Localizer(cut).localize(scan).outcome != Outcome.NO_MATCH
-    result = Localizer(cut, CREDITED).localize(scan)
+    assert Localizer(cut, UNCREDITED).localize(scan).outcome != Outcome.NO_MATCH
+    result = Localizer(cut).localize(scan)
     assert not (result.success and pose_correct(result.pose, twin_of(pose))), result.message
     assert result.outcome == Outcome.AMBIGUOUS, result.message
     assert any(pose_correct(h.pose, pose) for h in result.hypotheses), result.message
     assert any(pose_correct(h.pose, twin_of(pose)) for h in result.hypotheses), result.message
+
+
+def test_with_no_credit_for_unknown_cells_the_twin_is_answered_confidently():
+    """What the rule prevents: unknown counted against the true place (unknown_credit 0),
+    the corner pose's fully mapped twin wins with a confident answer."""
+    hall, pose = half_turn_symmetric_hall(), POSES[2]
+    scan = simulate_scan(hall, pose, 270, 541, 20.0, noise_std=0.01, rng=np.random.default_rng(1))
+    result = Localizer(unmapped_around(hall, pose, 1.0), UNCREDITED).localize(scan)
+    assert result.success and pose_correct(result.pose, twin_of(pose)), result.message
 
 
 def test_where_the_map_knows_every_cell_the_scan_reaches_the_answer_is_unchanged(office_map):
@@ -74,7 +84,7 @@ def test_where_the_map_knows_every_cell_the_scan_reaches_the_answer_is_unchanged
         if not (0 <= row < office_map.height and 0 <= col < office_map.width) or not office_map.free[row, col]:
             continue
         scan = simulate_scan(office_map, pose, 270, 541, 20.0, noise_std=0.01, rng=rng)
-        a, b = Localizer(office_map).localize(scan), Localizer(patched, CREDITED).localize(scan)
+        a, b = Localizer(office_map).localize(scan), Localizer(patched).localize(scan)
         if not a.success:
             continue
         assert (a.outcome, a.pose, a.score) == (b.outcome, b.pose, b.score), (pose, a.message, b.message)

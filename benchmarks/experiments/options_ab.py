@@ -1,5 +1,5 @@
 """bnb with two sets of options (A and B) on the benchmark's trials, in one process on one
-matcher per map (one precomputation), the two arms interleaved trial by trial so the
+matcher per map and arm (each built with its arm's options), the two arms interleaved trial by trial so the
 machine's drift falls on both. Rows: bench.worker.run_job's fields plus the arm, its
 options, and each match's peaks (leaf scores, refined fits, ranked candidates) read through
 `BranchAndBoundMatcher.on_peaks`. `--summarize` reads them: per suite (and change level or
@@ -26,6 +26,8 @@ import numpy as np
 from global_loc.bench import worker
 from global_loc.bench.changed import changed_trials
 from global_loc.bench.suites import carmen_trials, cut_trials, load_maps, prior_trials, sim_trials
+from global_loc.bench.unmapped import unmapped_trials
+from global_loc.core.localizer import Localizer, LocalizerConfig
 from global_loc.core.matchers import BranchAndBoundOptions
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -58,6 +60,8 @@ def build(args) -> tuple[list, dict]:
         full = load_maps(args.shared, quick=False)
         maps.update(full)
         trials += changed_trials(full, args.changed_poses, args.seed)
+    if 'unmapped' in args.suites:
+        trials += unmapped_trials(load_maps(args.shared, quick=False), args.changed_poses, args.seed)
     if 'carmen' in args.suites:
         carmen, carmen_maps, _ = carmen_trials(args.shared, args.scans_per_log, args.seed)
         maps.update(carmen_maps)
@@ -80,6 +84,29 @@ class PeakRecord:
             self.candidates = [(c.score, c.explained) for c in candidates]
 
 
+class ArmLocalizers:
+    """One Localizer per (map, arm), built with the arm's options: an option that shapes the
+    precomputation (bnb.unknown_credit adds the optimistic planes) is then compared as a
+    server would run it, not swapped into a matcher built without it. A trial with a map of
+    its own (the unmapped suite) gets its two for it alone."""
+
+    def __init__(self, arms):
+        self.arms = dict(arms)
+        self.built, self.own = {}, None
+
+    def __call__(self, trial, arm: str):
+        if trial.own_map is not None:
+            if self.own is None or self.own[0] is not trial.own_map:
+                self.own = (trial.own_map, {})
+            cache, key, source = self.own[1], arm, trial.own_map
+        else:
+            cache, key, source = self.built, (trial.map_name, arm), worker._MAPS[trial.map_name]
+        if key not in cache:
+            options = replace(BranchAndBoundOptions(), **self.arms[arm])
+            cache[key] = Localizer(source, LocalizerConfig(bnb=options))
+        return cache[key]
+
+
 def run(args) -> int:
     arms = (('A', parse_options(args.a)), ('B', parse_options(args.b)))
     trials, maps = build(args)
@@ -87,19 +114,21 @@ def run(args) -> int:
     worker.worker_init(maps, args.threads)
     cv2.setNumThreads(args.threads)
     os.makedirs(args.out, exist_ok=True)
+    localizers, current = ArmLocalizers(arms), [None]
+    worker.localizer_of = lambda trial: current[0]     # run_job localizes on the arm's Localizer
     t0 = time.time()
     with open(os.path.join(args.out, 'rows.jsonl'), 'w') as out:
         for i, trial in enumerate(trials):
-            matcher = worker.localizer_of(trial).matcher('bnb')
-            default = matcher.options
             for arm, changes in arms:
-                matcher.options, matcher.on_peaks = replace(default, **changes), PeakRecord()
+                current[0] = localizers(trial, arm)
+                matcher = current[0].matcher('bnb')
+                matcher.on_peaks = PeakRecord()
                 row = worker.run_job((i, trial, 'bnb'))
                 peaks = matcher.on_peaks
                 row.update(arm=arm, options=changes, searches=peaks.searches, peak_leaf=peaks.leaf,
                            peak_fit=peaks.fit, candidates=peaks.candidates)
                 out.write(json.dumps(row) + '\n')
-            matcher.options, matcher.on_peaks = default, None
+                matcher.on_peaks = None
             if i % 20 == 0:
                 print(f'{i}/{len(trials)} {time.time() - t0:.0f} s', file=sys.stderr, flush=True)
     return 0
@@ -108,6 +137,8 @@ def run(args) -> int:
 def group_name(r: dict) -> str:
     if r['suite'] == 'changed':
         return f"changed level {r['change']}"
+    if r['suite'] == 'unmapped':
+        return f"unmapped {r['cut']} {r['unmapped_m']:g} m"
     return f"carmen {r['log']}" if r['suite'] == 'carmen' else r['suite']
 
 
@@ -181,7 +212,7 @@ def main(argv=None) -> int:
     p = arm_arguments(__doc__.split('\n\n')[0], 'options_ab')
     p.add_argument('--suites', default='sim,cut,prior,carmen,changed', type=lambda s: s.split(','))
     p.add_argument('--poses', type=int, default=6)
-    p.add_argument('--changed-poses', type=int, default=4)
+    p.add_argument('--changed-poses', type=int, default=4, help='poses per map of the changed and unmapped suites')
     p.add_argument('--scans-per-log', type=int, default=12)
     p.add_argument('--threads', type=int, default=1, help='search threads (cv2.setNumThreads)')
     return experiment_main(p, argv, run, summarize)

@@ -140,21 +140,24 @@ class BranchAndBoundMatcher(Matcher):
         # 4. A confident answer on a map with unknown cells: the places the map cannot rule out.
         if self.stack.has_unknown and candidates and not tree.stopped and not tree.run.settled and \
                 self.judge_exhaustive(candidates, tree.stats).success:
-            tree = self.unknown_rivals(tree, options)
+            tree = self.unknown_rivals(tree, options, points, progress)
             candidates = self.refine_peaks(tree.run.leaves, tree.pts, tree.d0, points)
         if progress:
             progress(1.0, candidates[0].score if candidates else 0.0)
         settled = SETTLED if tree.run.settled else ''
         return Match(candidates, tree.stats, tree.stopped, settled)
 
-    def unknown_rivals(self, tree: 'TreeSearch', options: MatchOptions) -> 'TreeSearch':
+    def unknown_rivals(self, tree: 'TreeSearch', options: MatchOptions, points: ScanPoints,
+                       progress: Optional[ProgressFn]) -> 'TreeSearch':
         """The search again, over the optimistic planes (unknown cells a beam can reach may
         hide a wall, for at most bnb.unknown_credit of the scan: kernels), pruned from the
         start by the best leaf's band: every place whose optimistic score reaches it, so
         that a place whose walls the map lacks is never pruned for them and stays a rival
         (verdict.rival_scores). Run only after a confident answer (any other is not made
-        confident by a rival) and within what is left of the match's node budget and time.
-        Returns the tree with both searches' leaves."""
+        confident by a rival) and within what is left of the match's node budget and time;
+        it ends as soon as the places found so far, refined and checked for free space,
+        make the answer not confident (a rival is proved: the rest cannot make it confident
+        again, only add rivals). Returns the tree with both searches' leaves."""
         first = tree.run
         tu, tv, ta, tables = tree.tops
         top = self.options.levels - 1
@@ -162,12 +165,26 @@ class BranchAndBoundMatcher(Matcher):
         evidence = int(first.leaves[:, 4].max())
         max_nodes = options.max_nodes or self.options.max_nodes
         left = max(1, max_nodes - int(first.per_level.sum()))
+
+        slices = [0]
+
+        def rival_proved(leaves: np.ndarray, _top: int) -> bool:
+            # checked after slices 1, 2, 4, 8, ...: a found rival ends the search soon, and a
+            # search that finds none refines its leaves a few times, not once a slice
+            slices[0] += 1
+            if slices[0] & (slices[0] - 1):
+                return False
+            both = kept_leaves([leaves, first.leaves], tree.space, evidence, len(tree.pts))
+            return not self.judge_exhaustive(self.refine_peaks(both, tree.pts, tree.d0, points), tree.stats).success
+
+        # the progress reported goes on from where the first search left it (a cancel stops it too)
+        report = (lambda fraction, best: progress(0.95, best)) if progress else None
         start = time.perf_counter()
         run = self.searcher.run(self.stack.planes, tables, self.stack.free, tree.space,
-                                np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, left, None,
-                                tree.deadline, None, evidence, None)
+                                np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, left, report,
+                                tree.deadline, rival_proved, evidence, None)
         expansions = int(first.per_level.sum() + run.per_level.sum())
-        stopped = '' if run.exact else stop_reason(expansions, max_nodes, options.max_search_s)
+        stopped = '' if run.exact or run.settled else stop_reason(expansions, max_nodes, options.max_search_s)
         # a pose both searches kept once, with its optimistic score (an exhaustive second search
         # holds every leaf of the first: its evidence reaches the band)
         leaves = kept_leaves([run.leaves, first.leaves], tree.space, evidence, len(tree.pts))

@@ -53,12 +53,13 @@ class BranchAndBoundOptions:
                                                     'hypothesis', (0.0, math.pi))
     see_through_tolerance_cells: float = _option(3.0, "a return's beam is checked for walls up to this many "
                                                       'cells short of its end (noise, grazing beams)', (0.0, 100.0))
-    unknown_credit: float = _option(0.0, 'share of the scan that may count as explained on unknown cells a beam '
-                                         'can reach (a wall the map lacks): a place whose walls were never mapped '
-                                         'then stays a rival of its mapped twin (a second search after a confident '
-                                         'answer); 0 (the default): unknown counts as nothing - 1/3 cut the unmapped '
-                                         "suite's confident-wrong answers 8/80 -> 1/80 but turned right answers on "
-                                         'SLAM maps ambiguous (docs/decisions/0018)', (0.0, 1.0))
+    unknown_credit: float = _option(1.0 / 3.0, 'share of the scan that may count as explained on unknown cells a '
+                                               'beam can reach (a wall the map lacks): a place whose walls were '
+                                               'never mapped stays a rival of its mapped twin (a second search '
+                                               'after a confident answer); 0: unknown counts against a place as '
+                                               'free space does - faster on maps mostly unexplored, but confidently '
+                                               'wrong at the twin of a partly mapped place (docs/decisions/0020)',
+                                    (0.0, 1.0))
     min_confidence: float = _option(0.5, 'confidence (see the verdict) a result needs to be a success, in (0, 1]',
                                     (0.001, 1.0))
 

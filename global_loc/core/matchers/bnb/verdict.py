@@ -85,13 +85,16 @@ TWIN_TOLERANCE = math.radians(20.0)
 
 
 def rival_scores(c: Candidate) -> tuple[float, float]:
-    """(ranking score, field score) of another place as a rival of the best: what the map
-    cannot rule out there (its optimistic score, capped at options.unknown_credit above
-    its evidence when refined: peaks.PeakRefiner) - returns on unknown cells neither explain
-    nor contradict it."""
+    """(ranking score, field score) of another place as a rival of the best. Its ranking
+    score is what the map cannot rule out there: its optimistic score (capped at
+    options.unknown_credit above its evidence when refined: peaks.PeakRefiner) - returns on
+    unknown cells neither explain nor contradict it - less its beams through mapped walls,
+    which the map does contradict. Its field score stays its evidence: the field-score
+    margin keeps the free-space check from vouching for the best alone, and a credit
+    without that check would let a place whose beams cross walls tie the best."""
     if c.optimistic is None:
         return c.score, c.explained
-    return max(c.score, c.optimistic * (1.0 - (c.see_through or 0.0))), max(c.explained, c.optimistic)
+    return max(c.score, c.optimistic * (1.0 - (c.see_through or 0.0))), c.explained
 
 
 def is_twin(best: Candidate, other: Candidate) -> bool:
@@ -176,9 +179,9 @@ def ambiguous_verdict(best: Candidate, others: list[Candidate], ranks, best_fit:
     twin = '; the closest is the best turned by about 180 deg (a symmetric place: its twin)' \
         if closest is not None and is_twin(best, closest) else ''
     # a rival only for what the map does not say (its evidence alone lies beyond the lead)
-    closest_rank, closest_fit = rival_scores(closest) if closest is not None else (0.0, 0.0)
-    if closest is not None and min(closest.score / best.score, closest.explained / best_fit) < 1.0 - need <= \
-            min(closest_rank / best.score, closest_fit / best_fit):
+    closest_rank = rival_scores(closest)[0] if closest is not None else 0.0
+    if closest is not None and closest.score / best.score < 1.0 - need <= closest_rank / best.score and \
+            closest_rank > closest.score:
         return Verdict(Outcome.AMBIGUOUS, conf,
                        f'ambiguous: another place, {100 * (closest.unknown or 0.0):.0f}% of its returns on cells the '
                        f'map does not know, could explain the scan as well as the best (what the map does say there '
