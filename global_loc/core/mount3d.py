@@ -71,12 +71,17 @@ class Mount3D:
         else:
             roll, pitch = math.atan2(r[2, 1], r[2, 2]), math.asin(max(-1.0, min(1.0, -r[2, 0])))
             yaw = math.atan2(r[1, 0], r[0, 0])
-        return Mount3D(*(float(v) for v in m[:3, 3]), roll, pitch, yaw)
+        return Mount3D(*(float(v) + 0.0 for v in (*m[:3, 3], roll, pitch, yaw)))     # + 0.0: no -0.0
 
     @staticmethod
     def planar(base_T_laser: Rigid2D, z: float = 0.0) -> 'Mount3D':
         """An upright sensor at a 2D pose on the base (today's laser_x/laser_y/laser_yaw)."""
         return Mount3D(base_T_laser.x, base_T_laser.y, z, 0.0, 0.0, base_T_laser.yaw)
+
+    def describe(self) -> str:
+        """The one human-readable form: 'x=0.160 y=0.000 z=0.300 m, roll=0.0 pitch=0.0 yaw=180.0 deg'."""
+        return (f'x={self.x:.3f} y={self.y:.3f} z={self.z:.3f} m, roll={math.degrees(self.roll):.1f} '
+                f'pitch={math.degrees(self.pitch):.1f} yaw={math.degrees(self.yaw):.1f} deg')
 
     def as_tuple(self) -> tuple:
         return (self.x, self.y, self.z, self.roll, self.pitch, self.yaw)
