@@ -4,7 +4,8 @@
 #      constraints.txt;
 #   2. the wheels' CMake files fixed to this interpreter's paths (they name the wheel
 #      build host's /opt/python/cp311-cp311/...);
-#   3. colcon build of global_loc_interfaces and global_loc into install/;
+#   3. colcon build of global_loc_interfaces, tf2_msgs's TFMessage where no tf2_msgs is
+#      installed (vendor/), and global_loc into install/;
 #   4. a `ros2` command supporting `ros2 run` / `ros2 pkg`, when no real one exists;
 #   5. env.sh, which any shell sources to get all of the above;
 #   6. the bnb matcher's numba kernels compiled into numba's on-disk cache.
@@ -66,13 +67,38 @@ fi
 # ---- 3. colcon build ---------------------------------------------------------
 # Python sources are symlinked (--symlink-install), so editing global_loc/*.py needs
 # no rebuild; only the package metadata, entry points, maps and the interfaces do.
+# tf2_msgs (what /tf_static carries) is not on PyPI: vendor/tf2_msgs is its TFMessage
+# alone, built only when no other tf2_msgs is importable (a ROS install has the real one,
+# which a second tf2_msgs would shadow). A vendored build - this checkout's, or another's
+# on PYTHONPATH from its env.sh - does not count: its package.xml says so.
+tf2_msgs_elsewhere() {
+  (cd / && "$VENV/bin/python" - <<'PY') >/dev/null 2>&1
+import os, sys
+import tf2_msgs.msg
+prefix = os.path.abspath(tf2_msgs.msg.__file__).split(os.sep + 'lib' + os.sep)[0]
+xml = os.path.join(prefix, 'share', 'tf2_msgs', 'package.xml')
+sys.exit(1 if os.path.exists(xml) and 'Built by global_loc' in open(xml).read() else 0)
+PY
+}
+base_paths=("$ROOT" "$ROOT/global_loc_interfaces")
 build_inputs=$(ls package.xml setup.py setup.cfg resource/* maps/* config/* launch/* \
     global_loc_interfaces/package.xml global_loc_interfaces/CMakeLists.txt \
     global_loc_interfaces/action/* 2>/dev/null || true)
+if tf2_msgs_elsewhere; then
+  tf2_msgs="tf2_msgs: installed"
+  if [ -d "$ROOT/install/tf2_msgs" ]; then
+    say "tf2_msgs is installed: removing the vendored build"
+    rm -rf "$ROOT/install/tf2_msgs" "$ROOT/build/tf2_msgs"
+  fi
+else
+  tf2_msgs="tf2_msgs: vendored"
+  base_paths+=("$ROOT/vendor/tf2_msgs")
+  build_inputs="$build_inputs $(ls vendor/tf2_msgs/package.xml vendor/tf2_msgs/CMakeLists.txt vendor/tf2_msgs/msg/*)"
+fi
 build_stamp="$ROOT/install/.global_loc_build"
-want=$( { echo "$VENV"; cat $build_inputs; } | sha256sum | cut -c1-16)
+want=$( { echo "$VENV"; echo "$tf2_msgs"; cat $build_inputs; } | sha256sum | cut -c1-16)
 if [ "$(cat "$build_stamp" 2>/dev/null)" != "$want" ]; then
-  say "colcon build (global_loc_interfaces, global_loc)"
+  say "colcon build ($(basename -a "${base_paths[@]:1}" | paste -sd' ' -) global_loc)"
   mkdir -p "$ROOT/log"
   (
     # shellcheck disable=SC1091
@@ -80,7 +106,7 @@ if [ "$(cat "$build_stamp" 2>/dev/null)" != "$want" ]; then
     export AMENT_PREFIX_PATH="$VENV"
     unset COLCON_PREFIX_PATH CMAKE_PREFIX_PATH
     colcon --log-base "$ROOT/log" build \
-      --base-paths "$ROOT" "$ROOT/global_loc_interfaces" \
+      --base-paths "${base_paths[@]}" \
       --build-base "$ROOT/build" --install-base "$ROOT/install" \
       --symlink-install --event-handlers console_cohesion- status- \
       --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF \

@@ -14,8 +14,8 @@ from test_bag import TYPES, laser_scan, run_cli, transform
 from conftest import assert_pose_near, needs_pybullet
 from global_loc.core.cloud import pack_cloud
 from global_loc.core.transform import Rigid2D
-from global_loc.sim.lidar3d import LIDAR_MOUNT
 from global_loc.sim.raycast import simulate_scan
+from global_loc.sim.robot import LIDAR_MOUNT
 
 TF = 'tf2_msgs/msg/TFMessage'
 SCAN = 'sensor_msgs/msg/LaserScan'

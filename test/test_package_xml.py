@@ -42,6 +42,7 @@ ROSDEP_KEYS = {
     'setuptools': 'python3-setuptools',
     'std_msgs': 'std_msgs',
     'std_srvs': 'std_srvs',
+    'tf2_msgs': 'tf2_msgs',
     'tf2_ros': 'tf2_ros_py',          # the Python tf2 API is package tf2_ros_py
     'tqdm': 'python3-tqdm',
     'visualization_msgs': 'visualization_msgs',

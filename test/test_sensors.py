@@ -16,7 +16,7 @@ from ros_helpers import TRUTH, localize, pose_of
 from conftest import OFFICE_YAML, TEST_DIR, assert_pose_near
 from global_loc.core.paths import sim_params_file
 from global_loc.core.transform import Rigid2D
-from global_loc.sim.lidar3d import LIDAR_MOUNT
+from global_loc.sim.robot import LIDAR_MOUNT
 from global_loc.testing.processes import Process, TopicRecorder, isolated_env, start_server, start_sim
 
 pytestmark = pytest.mark.ros   # real ROS processes

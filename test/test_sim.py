@@ -9,8 +9,9 @@ from global_loc.core.localizer import Localizer
 from global_loc.core.transform import Rigid2D
 from global_loc.core.view import SensorReading, merge_view, reading_from_scan
 from global_loc.sim.laser import LaserConfig
-from global_loc.sim.lidar3d import LIDAR_MOUNT, Lidar3DConfig
+from global_loc.sim.lidar3d import Lidar3DConfig
 from global_loc.sim.raycast import simulate_scan
+from global_loc.sim.robot import LIDAR_MOUNT
 from global_loc.sim.simulator import (
     BASE_T_LASER,
     BASE_T_REAR_LASER,

@@ -19,9 +19,10 @@ from ..core.map_io import OccupancyMap  # noqa: E402
 from ..core.scan import ScanError, ScanPoints  # noqa: E402
 from ..core.view import SensorReading, merge_view, reading_from_scan  # noqa: E402
 from ..sim.laser import LaserConfig  # noqa: E402
-from ..sim.lidar3d import LIDAR_MOUNT, Lidar3DConfig  # noqa: E402
+from ..sim.lidar3d import Lidar3DConfig  # noqa: E402
 from ..sim.raycast import sample_free_poses  # noqa: E402
-from ..sim.simulator import FRONT_LASER_MOUNT, REAR_LASER_MOUNT, Simulator  # noqa: E402
+from ..sim.robot import FRONT_LASER_MOUNT, LIDAR_MOUNT, REAR_LASER_MOUNT  # noqa: E402
+from ..sim.simulator import Simulator  # noqa: E402
 from .suites import Trial  # noqa: E402
 from .tables import group, pct, save_figure, secs, stats  # noqa: E402
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .transform import Rigid2D, rpy_of_quaternion
+from .transform import Rigid2D, rotation_of_quaternion
 
 # A scan plane whose normal is within this of vertical is level: its beams, projected to
 # the floor, are beams from one origin with their true lengths (the free-space check holds).
@@ -51,17 +51,37 @@ class Mount3D:
     def from_quaternion(x: float, y: float, z: float, qx: float, qy: float, qz: float, qw: float) -> 'Mount3D':
         """From a tf transform's translation and rotation quaternion (normalized here). (7
         arguments: a geometry_msgs/Transform's seven numbers, as tf and a params file give them.)"""
-        q = np.array([qx, qy, qz, qw], dtype=float)
-        norm = float(np.linalg.norm(q))
-        if not math.isfinite(norm) or norm < 1e-9:
-            raise Mount3DError(f'a mounting quaternion must be finite and non-zero, got {q.tolist()}')
-        qx, qy, qz, qw = q / norm
-        return Mount3D(float(x), float(y), float(z), *rpy_of_quaternion(qx, qy, qz, qw))
+        try:
+            rotation = rotation_of_quaternion(qx, qy, qz, qw)
+        except ValueError:
+            raise Mount3DError(f'a mounting quaternion must be finite and non-zero, got {[qx, qy, qz, qw]}') from None
+        m = np.eye(4)
+        m[:3, :3], m[:3, 3] = rotation, (x, y, z)
+        return Mount3D.from_matrix(m)
+
+    @staticmethod
+    def from_matrix(base_T_sensor) -> 'Mount3D':
+        """From a 4x4 homogeneous transform base <- sensor (URDF's fixed-axis rpy of its rotation)."""
+        m = np.asarray(base_T_sensor, dtype=float)
+        r = m[:3, :3]
+        if abs(r[2, 0]) > 1.0 - 1e-12:
+            # pointing straight up or down: roll and yaw turn about one axis, only their sum
+            # is defined, and their sines and cosines are rounding noise - all of it in yaw
+            roll, pitch, yaw = 0.0, -math.copysign(math.pi / 2, r[2, 0]), math.atan2(-r[0, 1], r[1, 1])
+        else:
+            roll, pitch = math.atan2(r[2, 1], r[2, 2]), math.asin(max(-1.0, min(1.0, -r[2, 0])))
+            yaw = math.atan2(r[1, 0], r[0, 0])
+        return Mount3D(*(float(v) + 0.0 for v in (*m[:3, 3], roll, pitch, yaw)))     # + 0.0: no -0.0
 
     @staticmethod
     def planar(base_T_laser: Rigid2D, z: float = 0.0) -> 'Mount3D':
         """An upright sensor at a 2D pose on the base (today's laser_x/laser_y/laser_yaw)."""
         return Mount3D(base_T_laser.x, base_T_laser.y, z, 0.0, 0.0, base_T_laser.yaw)
+
+    def describe(self) -> str:
+        """The one human-readable form: 'x=0.160 y=0.000 z=0.300 m, roll=0.0 pitch=0.0 yaw=180.0 deg'."""
+        return (f'x={self.x:.3f} y={self.y:.3f} z={self.z:.3f} m, roll={math.degrees(self.roll):.1f} '
+                f'pitch={math.degrees(self.pitch):.1f} yaw={math.degrees(self.yaw):.1f} deg')
 
     def as_tuple(self) -> tuple:
         return (self.x, self.y, self.z, self.roll, self.pitch, self.yaw)
@@ -74,6 +94,12 @@ class Mount3D:
         return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
                          [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
                          [-sp, cp * sr, cp * cr]])
+
+    def matrix(self) -> np.ndarray:
+        """The 4x4 homogeneous transform base <- sensor (chains compose by matrix product)."""
+        m = np.eye(4)
+        m[:3, :3], m[:3, 3] = self.rotation(), (self.x, self.y, self.z)
+        return m
 
     def apply(self, points: np.ndarray) -> np.ndarray:
         """(N, 3) base-frame points of (N, 3) sensor-frame points, or of (N, 2) ones in the

@@ -3,8 +3,9 @@
 `Rigid2D(x, y, yaw)` is the pose of a child frame in a parent frame; `a * b` composes
 (parent_T_child * child_T_grandchild), `inverse()` inverts, `apply()` maps points.
 Everything else in global_loc (pixel frames, matches, laser mounting) composes these
-instead of writing out trigonometry. Also here: how far one pose is from another, the
-success test every evaluation uses, and the one way a pose is printed.
+instead of writing out trigonometry; quaternions are read and made here alone. Also
+here: how far one pose is from another, the success test every evaluation uses, and the
+one way a pose is printed.
 """
 from __future__ import annotations
 
@@ -26,6 +27,29 @@ def rpy_of_quaternion(qx: float, qy: float, qz: float, qw: float) -> tuple[float
     pitch = math.asin(max(-1.0, min(1.0, 2.0 * (qw * qy - qz * qx))))
     yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
     return roll, pitch, yaw
+
+
+def quaternion_of_rpy(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """The unit quaternion (x, y, z, w) of URDF's fixed-axis (roll, pitch, yaw), R = Rz(yaw)
+    Ry(pitch) Rx(roll): what tf carries for a URDF joint's origin."""
+    cr, sr = math.cos(roll / 2.0), math.sin(roll / 2.0)
+    cp, sp = math.cos(pitch / 2.0), math.sin(pitch / 2.0)
+    cy, sy = math.cos(yaw / 2.0), math.sin(yaw / 2.0)
+    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
+
+
+def rotation_of_quaternion(qx: float, qy: float, qz: float, qw: float) -> np.ndarray:
+    """The 3x3 rotation of a quaternion, normalized here (no detour through angles, so a
+    sensor pointing straight down keeps its heading); ValueError when it is not finite or zero."""
+    q = np.array([qx, qy, qz, qw], dtype=float)
+    norm = float(np.linalg.norm(q))
+    if not math.isfinite(norm) or norm < 1e-9:
+        raise ValueError(f'a rotation quaternion must be finite and non-zero, got {q.tolist()}')
+    x, y, z, w = q / norm
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
 def normalize_angle(a):

@@ -4,7 +4,6 @@ mounting on the robot base from the recording's /tf_static and /tf."""
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -12,11 +11,12 @@ import numpy as np
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
+from ..core.frames import compose, transform_matrix
 from ..core.mount import LaserMount, MountError
 from ..core.mount3d import Mount3D
 from ..core.scan import Scan
 from ..core.transform import Rigid2D
-from .messages import pose_from_msg, scan_from_msg, stamp_seconds
+from .messages import frame_name, pose_from_msg, scan_from_msg, stamp_seconds, transform_from_msg
 
 
 @functools.cache
@@ -168,30 +168,13 @@ def chain_mount(parents: dict, sources: dict, moving: set, frame: str, base_fram
     ignored = f' ({", ".join(sorted(moving))} on /tf move during the recording)' if moving else ''
     if not parents and frame != base_frame:
         raise MountingNotFound(f'no transforms on {" or ".join(TF_TOPICS)} that stay fixed{ignored}')
-    up_from_frame, up_from_base = path_to_root(parents, frame), path_to_root(parents, base_frame)
-    common = next((f for f in up_from_frame if f in up_from_base), None)
-    if common is None:
+    chain = compose(parents, base_frame, frame)
+    if chain is None:
         raise MountingNotFound(f'no chain of fixed transforms from {base_frame} to the sensor frame {frame} '
                                f'on {" or ".join(TF_TOPICS)}{ignored}')
-    frame_chain = up_from_frame[:up_from_frame.index(common) + 1]
-    base_chain = up_from_base[:up_from_base.index(common) + 1]
-    base_T_frame = np.linalg.inv(root_T(parents, base_chain)) @ root_T(parents, frame_chain)
-    used = {sources[f] for f in frame_chain[:-1] + base_chain[:-1]}
-    return BagMount3D(mount3d_of(base_T_frame), base_T_frame, frame,
-                      ', '.join(sorted(used)) or f'the messages\' frame_id is {base_frame}',
-                      ' -> '.join(base_chain + frame_chain[-2::-1]))
-
-
-def mount3d_of(base_T_sensor: np.ndarray) -> Mount3D:
-    """x y z roll pitch yaw of a 4x4 transform (URDF's fixed-axis rpy)."""
-    r = base_T_sensor[:3, :3]
-    roll, pitch = math.atan2(r[2, 1], r[2, 2]), math.asin(max(-1.0, min(1.0, -r[2, 0])))
-    yaw = math.atan2(r[1, 0], r[0, 0])
-    return Mount3D(*(float(v) for v in base_T_sensor[:3, 3]), roll, pitch, yaw)
-
-
-def frame_name(frame_id: str) -> str:
-    return frame_id.strip().lstrip('/')
+    used = {sources[f] for f in chain.composed}
+    return BagMount3D(Mount3D.from_matrix(chain.base_T_frame), chain.base_T_frame, frame,
+                      ', '.join(sorted(used)) or f'the messages\' frame_id is {base_frame}', ' -> '.join(chain.frames))
 
 
 def static_transforms(reader: Reader) -> tuple[dict, dict, set]:
@@ -204,9 +187,8 @@ def static_transforms(reader: Reader) -> tuple[dict, dict, set]:
     # (rosbags reads every topic when given no connections)
     for connection, _, raw in reader.messages(connections=connections) if connections else ():
         for t in decode(raw, connection.msgtype).transforms:
-            child, parent = frame_name(t.child_frame_id), frame_name(t.header.frame_id)
-            r, q = t.transform.translation, t.transform.rotation
-            value = (parent, np.array([r.x, r.y, r.z]), np.array([q.x, q.y, q.z, q.w]))
+            child, parent, translation, quaternion = transform_from_msg(t)
+            value = (parent, translation, quaternion)
             known = seen[connection.topic].setdefault(child, value)
             if connection.topic == '/tf' and not same_transform(known, value):
                 moving.add(child)
@@ -223,34 +205,12 @@ def same_transform(a, b) -> bool:
 
 
 def matrix(translation, quaternion) -> np.ndarray:
-    """4x4 homogeneous transform of a translation and a rotation quaternion (x, y, z, w)."""
-    norm = float(np.linalg.norm(quaternion))
-    if not math.isfinite(norm) or norm < 1e-9 or not np.isfinite(translation).all():
+    """4x4 homogeneous transform of a recorded translation and rotation quaternion (x, y, z, w)."""
+    try:
+        return transform_matrix(translation, quaternion)
+    except ValueError:
         raise BagError(f'a transform in the recording is not finite or has a zero quaternion: '
-                       f'{translation.tolist()}, {quaternion.tolist()}')
-    x, y, z, w = quaternion / norm
-    m = np.eye(4)
-    m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                 [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                 [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
-    m[:3, 3] = translation
-    return m
-
-
-def path_to_root(parents: dict, frame: str) -> list[str]:
-    """`frame`, its parent, the parent's parent, ... (a loop in the tree ends the walk)."""
-    chain = [frame]
-    while chain[-1] in parents and parents[chain[-1]][0] not in chain:
-        chain.append(parents[chain[-1]][0])
-    return chain
-
-
-def root_T(parents: dict, chain: list[str]) -> np.ndarray:
-    """The pose of chain[0] in chain[-1], composing each frame's transform to its parent."""
-    m = np.eye(4)
-    for frame in reversed(chain[:-1]):
-        m = m @ parents[frame][1]
-    return m
+                       f'{translation.tolist()}, {quaternion.tolist()}') from None
 
 
 def planar_mount(base_T_laser: np.ndarray, base_frame: str, laser_frame: str) -> LaserMount:

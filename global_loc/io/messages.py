@@ -25,6 +25,19 @@ def scan_from_msg(msg) -> Scan:
                 np.asarray(msg.ranges, dtype=float), stamp_seconds(msg.header.stamp), float(msg.angle_max))
 
 
+def frame_name(frame_id: str) -> str:
+    """A frame id as tf2 names it: no leading slash, no surrounding blanks."""
+    return frame_id.strip().lstrip('/')
+
+
+def transform_from_msg(msg) -> tuple[str, str, np.ndarray, np.ndarray]:
+    """A geometry_msgs/TransformStamped as (child frame, parent frame, translation x y z,
+    rotation quaternion x y z w)."""
+    r, q = msg.transform.translation, msg.transform.rotation
+    return (frame_name(msg.child_frame_id), frame_name(msg.header.frame_id), np.array([r.x, r.y, r.z], dtype=float),
+            np.array([q.x, q.y, q.z, q.w], dtype=float))
+
+
 def pose_from_msg(msg) -> Rigid2D:
     """A geometry_msgs/Pose's position and heading."""
     return Rigid2D(msg.position.x, msg.position.y, yaw_of_quaternion(msg.orientation))

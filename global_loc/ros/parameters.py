@@ -81,7 +81,7 @@ SPECS = [
     Spec('scan_timeout_s', 5.0, 'how long a request waits for a scan that arrives after it, s',
          BOUNDS['scan_timeout_s'], live=True),
     Spec('map_frame', 'map', 'frame of the published pose'),
-    Spec('base_frame', 'base_link', 'robot base frame (for tf2, when available)'),
+    Spec('base_frame', 'base_link', 'robot base frame (sensor mountings are looked up on it in tf)'),
     Spec('pose_topic', '/amcl_pose', "the localizer's pose (PoseWithCovarianceStamped, in map_frame), watched"),
     Spec('odom_topic', '/odom', 'nav_msgs/Odometry: moves the watched pose and the hypotheses'),
     Spec('cmd_vel_topic', '/cmd_vel', 'where rotate_in_place turns the robot (Twist)'),
@@ -119,10 +119,10 @@ SPECS = [
          (1e-6, 100.0), live=True),
     Spec('covariance_yaw', _L.covariance_yaw, 'yaw variance published with the thesis matchers, rad^2',
          (1e-6, 10.0), live=True),
-    Spec('laser_x', 0.0, 'laser position on the base, m (used without tf2)', limits.LASER_OFFSET_M, live=True),
-    Spec('laser_y', 0.0, 'laser position on the base, m (used without tf2)', limits.LASER_OFFSET_M, live=True),
-    Spec('laser_yaw', 0.0, 'laser heading on the base, rad (used without tf2)', limits.LASER_ANGLE_RAD, live=True),
-    Spec('laser_roll', 0.0, f'laser roll on the base, rad (used without tf2): pi for a laser mounted upside down; '
+    Spec('laser_x', 0.0, 'laser position on the base, m (used when tf has none)', limits.LASER_OFFSET_M, live=True),
+    Spec('laser_y', 0.0, 'laser position on the base, m (used when tf has none)', limits.LASER_OFFSET_M, live=True),
+    Spec('laser_yaw', 0.0, 'laser heading on the base, rad (used when tf has none)', limits.LASER_ANGLE_RAD, live=True),
+    Spec('laser_roll', 0.0, f'laser roll on the base, rad (used when tf has none): pi for a laser mounted upside down; '
                             f'a tilted laser (more than {limits.MAX_LASER_TILT_DEG:g} deg from 0 or pi) is refused',
          limits.LASER_ANGLE_RAD, live=True),
     Spec('max_search_s', 5.0, 'seconds a goal\'s search may take, shared by every map it searches; then the goal ends '
@@ -264,7 +264,7 @@ def read_config(node) -> ServerConfig:
     for sensor in specs:
         if not node.has_parameter(sensor.mount_parameter):
             descriptor = ParameterDescriptor(description=f'{sensor.topic} on the base (x y z roll pitch yaw; m, '
-                                                         f'rad) when tf2 has none [applied on configure]')
+                                                         f'rad) when tf has none [applied on configure]')
             problem = declare(node, sensor.mount_parameter, Parameter.Type.DOUBLE_ARRAY, descriptor)
             if problem:     # the value it was started with; set it and configure
                 raise ConfigError(problem)

@@ -2,12 +2,17 @@
 newest message of each with its arrival time, each one's mounting on the base, and the
 view a request localizes (core.view.merge_view).
 
-A sensor's mounting comes from tf2 when it is importable and has base_frame <- the
-message's frame, else from the parameter `sensors.<name>.mount` (x y z roll pitch yaw;
-<name> is the topic without its leading slash, other slashes as underscores - nav2's
-obstacle layer keys its per-source parameters by a source name the same way), else, for
-the primary laser (the first scan topic) only, from laser_x/laser_y/laser_yaw/laser_roll.
-A sensor with none of them is left out of the view, saying so.
+A sensor's mounting comes from tf when it has base_frame <- the message's frame - tf2_ros
+when it is importable, else the static transforms received on /tf_static
+(ros/tf_static.py: what robot_state_publisher publishes from a URDF, without tf2_ros) -
+else from the parameter `sensors.<name>.mount` (x y z roll pitch yaw; <name> is the topic
+without its leading slash, other slashes as underscores - nav2's obstacle layer keys its
+per-source parameters by a source name the same way), else, for the primary laser (the
+first scan topic) only, from laser_x/laser_y/laser_yaw/laser_roll. A sensor with none of
+them is left out of the view, saying so. tf comes first, as it did with tf2 alone
+(docs/decisions/0022): a parameter that says otherwise is named in the log line that says
+a mounting came from /tf_static. Each lookup reads what has arrived (never waits), so a
+/tf_static that arrives late is used from the next message on.
 
 A request's view waits for the first message that arrives after the request, then up to
 merge_window_s for the other sensors; a sensor with nothing since the request is left
@@ -20,6 +25,8 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Optional
 
+import numpy as np
+
 from ..core.motion import pose_fitter
 from ..core.mount import LaserMount, MountError
 from ..core.mount3d import Mount3D, Mount3DError
@@ -27,6 +34,7 @@ from ..core.outcome import CanceledError
 from ..core.scan import ScanError, scan_to_points
 from ..core.view import SensorReading, View, ViewConfig, ViewError, merge_view
 from ..io.messages import reading_from_msg, scan_from_msg
+from .tf_static import subscribe_static_transforms
 
 SCAN, CLOUD = 'scan', 'cloud'
 
@@ -91,17 +99,22 @@ class NoMounting(ViewError):
 
 
 class SensorMounts:
-    """Each sensor's mounting: tf2 when importable and it has it, else the parameters."""
+    """Each sensor's mounting: tf (tf2_ros when importable, else the /tf_static reader)
+    when it has it, else the parameters."""
 
-    def __init__(self, node):
+    def __init__(self, node, guarded: Callable = lambda f: f):
         self.node = node
         self.base_frame, self.laser_fallback = 'base_link', Mount3D()
+        self.buffer = self.static = None
+        self.told: dict = {}            # topic -> the /tf_static mounting last logged for it
         try:
             import tf2_ros
         except ImportError:
-            node.get_logger().info('tf2_ros not available: sensor mountings come from the sensors.<name>.mount '
-                                   'parameters (the primary laser: laser_x/laser_y/laser_yaw/laser_roll)')
-            self.buffer = None
+            self.static = subscribe_static_transforms(node, guarded)
+            node.get_logger().info(
+                f'tf2_ros not available: sensor mountings come from '
+                f'{"the static transforms on /tf_static, else " if self.static else "(no tf2_msgs either) "}'
+                f'the sensors.<name>.mount parameters (the primary laser: laser_x/laser_y/laser_yaw/laser_roll)')
             return
         self.buffer = tf2_ros.Buffer()
         self.listener = tf2_ros.TransformListener(self.buffer, node)
@@ -111,17 +124,13 @@ class SensorMounts:
         self.base_frame = config['base_frame']
         self.laser_fallback = Mount3D(config['laser_x'], config['laser_y'], 0.0, config['laser_roll'], 0.0,
                                       config['laser_yaw'])
+        self.told = {}
 
     def mount(self, spec: SensorSpec, frame: str) -> Mount3D:
         """`spec`'s mounting for a message in `frame`; NoMounting when there is none."""
-        if self.buffer is not None and frame:
-            try:
-                t = self.buffer.lookup_transform(self.base_frame, frame, _latest()).transform
-            except Exception:   # tf2 raises several types; any means "not known"
-                pass
-            else:
-                p, q = t.translation, t.rotation
-                return Mount3D.from_quaternion(p.x, p.y, p.z, q.x, q.y, q.z, q.w)
+        from_tf = self.from_tf(spec, frame)
+        if from_tf is not None:
+            return from_tf
         if spec.mount is not None:
             return spec.mount
         if spec.primary:
@@ -129,6 +138,36 @@ class SensorMounts:
         raise NoMounting(f'no mounting: no tf {self.base_frame} <- {frame or "(no frame_id)"} and no parameter '
                          f'{spec.mount_parameter} [x, y, z, roll, pitch, yaw]')
 
+    def from_tf(self, spec: SensorSpec, frame: str) -> Optional[Mount3D]:
+        """base_frame <- `frame` from tf2 or /tf_static; None when tf does not have it (yet)."""
+        if not frame:
+            return None
+        if self.buffer is not None:
+            try:
+                t = self.buffer.lookup_transform(self.base_frame, frame, _latest()).transform
+            except Exception:   # tf2 raises several types; any means "not known"
+                return None
+            p, q = t.translation, t.rotation
+            return Mount3D.from_quaternion(p.x, p.y, p.z, q.x, q.y, q.z, q.w)
+        found = self.static.lookup(self.base_frame, frame) if self.static is not None else None
+        if found is None:
+            return None
+        mount, chain = found
+        if self.told.get(spec.topic) != mount:
+            self.told[spec.topic] = mount
+            self.node.get_logger().info(f'{spec.topic}: mounting from /tf_static ({chain}): {mount.describe()}'
+                                        f'{self.overridden(spec, mount)}')
+        return mount
+
+    def overridden(self, spec: SensorSpec, mount: Mount3D) -> str:
+        """What the log line adds when a parameter set for `spec` says otherwise than tf."""
+        def differs(other: Mount3D) -> bool:
+            return not np.allclose(other.matrix(), mount.matrix(), atol=1e-3)
+        if spec.mount is not None and differs(spec.mount):
+            return f'; {spec.mount_parameter} says {spec.mount.describe()}, but tf comes first'
+        if spec.primary and spec.mount is None and self.laser_fallback != Mount3D() and differs(self.laser_fallback):
+            return f'; laser_x/laser_y/laser_yaw/laser_roll say {self.laser_fallback.describe()}, but tf comes first'
+        return ''
 
     def laser_mount(self, specs: tuple, frame: str) -> LaserMount:
         """The primary laser's mounting as the 2D methods take it (MountError: tilted, none)."""

@@ -113,7 +113,7 @@ class GlobalLocServer(LifecycleNode):
         self.config = config
         self.path.stopping.clear()
         if self.mounts is None:        # one tf listener for the node's life
-            self.mounts = SensorMounts(self)
+            self.mounts = SensorMounts(self, self.guarded)
         self.mounts.configure(config)
         self.sensors.configure(config.sensors)
         self.create_interfaces(config)

@@ -1,7 +1,7 @@
 """`ros2 run global_loc sim`: the pybullet simulator as a ROS node.
 
 Publishes sensor_msgs/LaserScan on /scan (frame `laser`, mounted on base_link at
-x 0.16 m — give the server `laser_x:=0.16`) at `rate_hz`, wheel odometry as
+x 0.16 m) at `rate_hz`, wheel odometry as
 nav_msgs/Odometry on /odom (frame `odom`, child `base_link`; noise and drift set by
 `odom_noise`, `odom_drift`), and the robot's true pose as geometry_msgs/PoseStamped on
 /sim/true_pose. Drives the wheels from /cmd_vel
@@ -9,11 +9,17 @@ nav_msgs/Odometry on /odom (frame `odom`, child `base_link`; noise and drift set
 
 Optional sensors (off by default: the simulator is then exactly the 2D one):
 `rear_laser:=true` publishes /scan_rear (frame `laser_rear`, `rear_fov_deg` 270, at the
-back facing back: x -0.25 m, yaw 180 deg, z 0.30 m - sim.simulator.REAR_LASER_MOUNT), at
-the front laser's rate; `lidar3d:=true` publishes /points, a sensor_msgs/PointCloud2 of a
-16-ring lidar over +-15 deg, 360 deg (frame `lidar`, organized: one row per ring, lowest
-first, NaN where a ray hit nothing; x 0, z 0.5 m - sim.lidar3d.LIDAR_MOUNT) at
-`lidar_rate_hz`, in a world extruded in 3D (walls 2.5 m, tables 0.7 m, cabinets 1.2 m).
+back facing back: x -0.25 m, yaw 180 deg, z 0.30 m), at the front laser's rate;
+`lidar3d:=true` publishes /points, a sensor_msgs/PointCloud2 of a 16-ring lidar over +-15
+deg, 360 deg (frame `lidar`, organized: one row per ring, lowest first, NaN where a ray hit
+nothing; x 0, z 0.5 m) at `lidar_rate_hz`, in a world extruded in 3D (walls 2.5 m, tables
+0.7 m, cabinets 1.2 m).
+
+The mountings of the sensors it runs go on /tf_static once at start, as
+robot_state_publisher puts a URDF's fixed joints there (tf2_msgs/msg/TFMessage, reliable,
+transient local, depth 1): the joints base_link -> each frame it stamps, read from
+sim/pioneer3dx.urdf (sim/robot.py), the same the rays are cast from. Without tf2_msgs
+nothing goes there, and config/sim.yaml (--params-file) tells the server instead.
 """
 from __future__ import annotations
 
@@ -30,13 +36,16 @@ from sensor_msgs.msg import LaserScan, PointCloud2
 from ..core.map_io import MapError, load_map_yaml
 from ..core.paths import default_map_yaml, sim_params_file
 from ..core.transform import Rigid2D, format_pose
+from ..io.urdf import joints_to
 from ..sim.laser import LaserConfig
 from ..sim.lidar3d import Lidar3DConfig
+from ..sim.robot import BASE_FRAME, JOINTS, LASER_FRAME, LIDAR_FRAME, REAR_LASER_FRAME
 from ..sim.simulator import OdometryNoise, Simulator
 from .cloud import cloud_to_msg
 from .convert import pose_from_msg, pose_to_msg, scan_to_msg
 from .node_main import exit_process, run_node
 from .param_types import ParameterError, declare, describe, typed_value
+from .tf_static import publish_static_transforms
 
 # Each number's range (inclusive): a rate, a beam count or a range outside it is one line and
 # exit code 2 at start, not a timer or a ray caster failing later.
@@ -100,12 +109,21 @@ class SimNode(Node):
         self.create_subscription(PoseStamped, '/sim/set_pose', self.on_set_pose, 10)
         self.period = 1.0 / laser.rate_hz
         self.create_timer(self.period, self.tick)
+        mountings = self.publish_mountings([LASER_FRAME] + [REAR_LASER_FRAME] * bool(rear)
+                                           + [LIDAR_FRAME] * bool(lidar))
         self.get_logger().info(f'sim ready: {map_yaml} as {self.sim.num_wall_boxes} boxes, robot at '
                                f'{format_pose(start)}, {clutter} clutter objects, '
                                f'{laser.num_beams} beams over {laser.fov_deg} deg'
                                f'{f", rear laser on /scan_rear over {rear.fov_deg} deg" if rear else ""}'
-                               f'{f", 3D lidar on /points at {lidar.rate_hz} Hz" if lidar else ""}; '
-                               f'the server finds these sensors\' mountings in {sim_params_file()} (--params-file)')
+                               f'{f", 3D lidar on /points at {lidar.rate_hz} Hz" if lidar else ""}; {mountings}')
+
+    def publish_mountings(self, frames: list) -> str:
+        """`frames`' mountings on /tf_static (latched, from the URDF); what the log says of them."""
+        self.tf_static = publish_static_transforms(self, mounting_joints(frames))
+        if self.tf_static is None:
+            return f'no tf2_msgs, so no /tf_static: the server finds these sensors\' mountings in {sim_params_file()}'
+        return (f'their mountings on /tf_static ({BASE_FRAME} -> {", ".join(frames)}, from the URDF), and in '
+                f'{sim_params_file()} (--params-file) for a server without tf')
 
     def close(self) -> None:
         """Disconnect pybullet (run_node calls it on shutdown)."""
@@ -129,7 +147,7 @@ class SimNode(Node):
             self.sim.drive(v, w, self.period)
         scan = self.sim.scan()
         stamp = self.get_clock().now().to_msg()
-        msg = scan_to_msg(scan, 'laser', stamp, self.period)
+        msg = scan_to_msg(scan, LASER_FRAME, stamp, self.period)
         truth = PoseStamped()
         truth.header.frame_id = 'map'
         truth.header.stamp = stamp
@@ -140,7 +158,7 @@ class SimNode(Node):
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = (float(c) for c in (v, w))
         self.scan_pub.publish(msg)
         if self.rear_pub is not None:
-            self.rear_pub.publish(scan_to_msg(self.sim.rear_scan(), 'laser_rear', self.get_clock().now().to_msg(),
+            self.rear_pub.publish(scan_to_msg(self.sim.rear_scan(), REAR_LASER_FRAME, self.get_clock().now().to_msg(),
                                               self.period))
         self.odom_pub.publish(odom)
         self.pose_pub.publish(truth)
@@ -149,7 +167,15 @@ class SimNode(Node):
         """One revolution of the 3D lidar at the robot's current pose."""
         points = self.sim.lidar_points()
         rings = np.repeat(np.arange(points.shape[0])[:, None], points.shape[1], axis=1)
-        self.cloud_pub.publish(cloud_to_msg(points, 'lidar', self.get_clock().now().to_msg(), rings))
+        self.cloud_pub.publish(cloud_to_msg(points, LIDAR_FRAME, self.get_clock().now().to_msg(), rings))
+
+
+def mounting_joints(frames: list) -> list:
+    """The URDF's fixed joints from base_link down to each of `frames`, each joint once."""
+    joints = {}
+    for frame in frames:
+        joints.update({j.child: j for j in joints_to(JOINTS, BASE_FRAME, frame)})
+    return list(joints.values())
 
 
 def main(args=None):

@@ -1,18 +1,15 @@
 """The simulated 3D lidar: a 16-ring spinning lidar (Velodyne VLP-16's geometry: rings
-every 2 deg over +-15 deg, 360 deg around) and its mounting on the Pioneer, cast in the
-pybullet world by the simulator (`Simulator.lidar_points`)."""
+every 2 deg over +-15 deg, 360 deg around), cast in the pybullet world by the simulator
+(`Simulator.lidar_points`) from its mounting on the Pioneer (the URDF's lidar_joint:
+sim/robot.py `LIDAR_MOUNT`, on a 0.2 m mast above the chassis over the wheel axle; the mast
+and the laser below are not in its rays' way: the rays start at range_min, the chassis is
+below -15 deg)."""
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
 import numpy as np
-
-from ..core.mount3d import Mount3D
-
-# On a 0.2 m mast above the chassis, over the wheel axle: the mast and the laser below
-# are not in its rays' way (the rays start at range_min, the chassis is below -15 deg).
-LIDAR_MOUNT = Mount3D(0.0, 0.0, 0.5)
 
 
 @dataclass

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import os
+import tempfile
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,19 +27,19 @@ from ..core.map_io import OccupancyMap
 from ..core.mount3d import Mount3D
 from ..core.scan import Scan
 from ..core.transform import Rigid2D
+from ..io.urdf import bodies_only
 from .laser import LaserConfig
-from .lidar3d import LIDAR_MOUNT, Lidar3DConfig
+from .lidar3d import Lidar3DConfig
 from .raycast import sample_free_poses
+from .robot import FRONT_LASER_MOUNT, LIDAR_MOUNT, REAR_LASER_MOUNT, URDF
 from .world import add_map_walls, obstacle_heights
 
-URDF = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'pioneer3dx.urdf')
-# The laser's mounting on base_link, as in the URDF (laser_joint): publish it to the server.
-BASE_T_LASER = Rigid2D(0.16, 0.0, 0.0)
-LASER_HEIGHT = 0.30
-FRONT_LASER_MOUNT = Mount3D.planar(BASE_T_LASER, LASER_HEIGHT)
-# The optional rear laser: on the chassis' back edge, at the front laser's height, facing back.
-BASE_T_REAR_LASER = Rigid2D(-0.25, 0.0, math.pi)
-REAR_LASER_MOUNT = Mount3D.planar(BASE_T_REAR_LASER, LASER_HEIGHT)
+# The sensors on base_link as the URDF's fixed joints put them (sim/robot.py): the front
+# laser (laser_joint; its rays leave from that link), the optional rear laser on the
+# chassis' back edge facing back, the optional 3D lidar; seen from above for the 2D methods.
+BASE_T_LASER = FRONT_LASER_MOUNT.upright()
+LASER_HEIGHT = FRONT_LASER_MOUNT.z
+BASE_T_REAR_LASER = REAR_LASER_MOUNT.upright()
 RAY_BATCH = 16384    # pybullet's largest rayTestBatch
 WHEEL_RADIUS = 0.0975
 WHEEL_SEPARATION = 0.33
@@ -64,6 +65,17 @@ class ClutterObject:
     yaw: float = 0.0
 
 
+def _load_bodies(urdf: str, client) -> int:
+    """The robot as pybullet's multibody: the URDF's links that have a body (io/urdf.py
+    `bodies_only`). The optional sensors' links are frames, cast from by their mountings;
+    as links they would change the multibody, and so every seeded run's physics."""
+    with tempfile.TemporaryDirectory() as folder:
+        path = os.path.join(folder, os.path.basename(urdf))
+        with open(path, 'w') as f:
+            f.write(bodies_only(urdf))
+        return p.loadURDF(path, [0, 0, 0], physicsClientId=client)
+
+
 class Simulator:
     def __init__(self, occupancy_map: OccupancyMap, laser: LaserConfig | None = None, seed: int = 0,
                  odometry_noise: OdometryNoise | None = None, rear_laser: LaserConfig | None = None,
@@ -83,7 +95,7 @@ class Simulator:
         p.createMultiBody(0, plane, physicsClientId=self.client)
         self.num_wall_boxes = add_map_walls(self.client, occupancy_map,
                                             obstacle_heights(occupancy_map) if lidar else None)
-        self.robot = p.loadURDF(URDF, [0, 0, 0], physicsClientId=self.client)
+        self.robot = _load_bodies(URDF, self.client)
         joints = {p.getJointInfo(self.robot, j, physicsClientId=self.client)[1].decode(): j
                   for j in range(p.getNumJoints(self.robot, physicsClientId=self.client))}
         self.left, self.right = joints['left_wheel_joint'], joints['right_wheel_joint']
