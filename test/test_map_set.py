@@ -6,7 +6,7 @@ import pytest
 from conftest import OFFICE_YAML, assert_pose_near, seeded_office_scans
 from global_loc.core.localizer import Localizer
 from global_loc.core.map_io import load_map_yaml, make_map
-from global_loc.core.map_set import MapSet, MapSetError, map_name, named_paths
+from global_loc.core.map_set import MapSet, MapSetError, MapSetPrior, map_name, named_paths
 from global_loc.core.outcome import Outcome
 from global_loc.sim.raycast import sample_free_poses, simulate_scan
 
@@ -48,7 +48,7 @@ def test_identical_floors_are_ambiguous_with_a_hypothesis_on_each_and_the_prior_
         assert result.outcome == Outcome.AMBIGUOUS and result.confidence < 0.5, result.message
         assert 'ambiguous between maps' in result.message
         assert {h.map for h in result.hypotheses[:2]} == {'floor_1', 'floor_2'}
-        settled = floors.localize(scan, maps=['floor_2'])        # a prior names the floor
+        settled = floors.localize(scan, prior=MapSetPrior(maps=['floor_2']))        # a prior names the floor
         assert settled.success and settled.map == 'floor_2'
         assert_pose_near(settled.pose, truth)
 
