@@ -17,7 +17,7 @@ from ..core.localizer import Localizer
 from ..core.map_io import OccupancyMap
 from ..core.map_set import MapSet
 from ..core.scan import scan_to_points
-from ..core.stored_pose import confirm_stored_pose, stored_from_result
+from ..core.stored_pose import SinceStored, confirm_stored_pose, stored_from_result
 from ..core.transform import Rigid2D, pose_correct
 from ..sim.raycast import sample_free_poses, simulate_scan
 from .tables import group, pct, secs
@@ -88,7 +88,7 @@ def start_up_rows(every: MapSet, result, name: str, pose: Rigid2D, rng) -> list[
     for case, (on, truth) in cases.items():
         points = scan_to_points(simulate_scan(every.localizers[on].map, truth, rng=rng, **LASER))
         t0 = time.perf_counter()
-        confirmed, _ = confirm_stored_pose(every, points, stored, Rigid2D(), None, 0.0)
+        confirmed, _ = confirm_stored_pose(every, points, stored, Rigid2D(), SinceStored(0.0))
         answer = confirmed or every.localize_points(points)
         start_s = time.perf_counter() - t0
         full = every.localize_points(points)
