@@ -18,7 +18,7 @@ from global_loc.core.matchers import MatchOptions
 from global_loc.core.mount import LaserMount, MountError
 from global_loc.core.scan import Scan, ScanError, scan_to_points
 from global_loc.core.search_region import SearchRegion
-from global_loc.core.transform import Rigid2D, pose_correct
+from global_loc.core.transform import Quaternion, Rigid2D, pose_correct
 from global_loc.sim.raycast import raycast_ranges, simulate_scan
 from global_loc.sim.synthetic_maps import small_room
 
@@ -129,7 +129,7 @@ def test_mount_from_tf_reads_the_x_axis_heading_and_upside_down():
     assert same.upside_down and same.base_T_laser.yaw == pytest.approx(0.7)
     # a quaternion with roll pi about x, then yaw 0.7: q = qz(0.7) * qx(pi)
     c, s = math.cos(0.35), math.sin(0.35)
-    from_q = LaserMount.from_quaternion(0.2, -0.1, c, s, 0.0, 0.0)     # (x, y, z, w) = (cos, sin, 0, 0)
+    from_q = LaserMount.from_quaternion(0.2, -0.1, Quaternion(c, s, 0.0, 0.0))
     assert from_q.upside_down and from_q.base_T_laser.yaw == pytest.approx(0.7)
     assert LaserMount.from_roll_pitch_yaw(0, 0, math.radians(178), 0, 0).upside_down   # within the tilt bound
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .transform import Rigid2D, rpy_of_quaternion
+from .transform import Quaternion, Rigid2D, rpy_of_quaternion
 
 # A scan plane whose normal is within this of vertical is level: its beams, projected to
 # the floor, are beams from one origin with their true lengths (the free-space check holds).
@@ -48,10 +48,10 @@ class Mount3D:
         return Mount3D(*values)
 
     @staticmethod
-    def from_quaternion(x: float, y: float, z: float, qx: float, qy: float, qz: float, qw: float) -> 'Mount3D':
-        """From a tf transform's translation and rotation quaternion (normalized here). (7
-        arguments: a geometry_msgs/Transform's seven numbers, as tf and a params file give them.)"""
-        q = np.array([qx, qy, qz, qw], dtype=float)
+    def from_quaternion(x: float, y: float, z: float, rotation: Quaternion) -> 'Mount3D':
+        """From a tf transform's translation and rotation (a quaternion with fields x, y, z, w:
+        core.transform.Quaternion or a geometry_msgs/Quaternion; normalized here)."""
+        q = np.array([rotation.x, rotation.y, rotation.z, rotation.w], dtype=float)
         norm = float(np.linalg.norm(q))
         if not math.isfinite(norm) or norm < 1e-9:
             raise Mount3DError(f'a mounting quaternion must be finite and non-zero, got {q.tolist()}')

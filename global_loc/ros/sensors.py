@@ -121,7 +121,7 @@ class SensorMounts:
                 pass
             else:
                 p, q = t.translation, t.rotation
-                return Mount3D.from_quaternion(p.x, p.y, p.z, q.x, q.y, q.z, q.w)
+                return Mount3D.from_quaternion(p.x, p.y, p.z, q)
         if spec.mount is not None:
             return spec.mount
         if spec.primary:
