@@ -38,7 +38,7 @@ def maps_rows(maps: dict[str, OccupancyMap], poses_per_map: int, seed: int) -> l
         rng = np.random.default_rng(seed + 700 + i)
         twins = MapSet({TWINS[0]: loc, TWINS[1]: loc})
         for pose in sample_free_poses(loc.map, poses_per_map, rng, clearance=0.5):
-            scan = simulate_scan(loc.map, pose, rng=rng, **LASER)
+            scan = simulate_scan(loc.map, pose, LASER, rng=rng)
             t0 = time.perf_counter()
             alone = loc.localize(scan)
             own_s = time.perf_counter() - t0
@@ -86,7 +86,7 @@ def start_up_rows(every: MapSet, result, name: str, pose: Rigid2D, rng) -> list[
             break
     rows = []
     for case, (on, truth) in cases.items():
-        points = scan_to_points(simulate_scan(every.localizers[on].map, truth, rng=rng, **LASER))
+        points = scan_to_points(simulate_scan(every.localizers[on].map, truth, LASER, rng=rng))
         t0 = time.perf_counter()
         confirmed, _ = confirm_stored_pose(every, points, stored, Rigid2D(), SinceStored(0.0))
         answer = confirmed or every.localize_points(points)

@@ -15,6 +15,7 @@ from ..core.localizer import Localizer
 from ..core.map_io import OccupancyMap
 from ..core.matchers.bnb import BranchAndBoundOptions
 from ..core.transform import pose_correct
+from ..sim.laser import LaserConfig
 from ..sim.raycast import sample_free_poses, simulate_scan
 from . import worker
 from .changed import CHANGE_LEVELS, changed_trials
@@ -58,7 +59,8 @@ def big_map_rows(building: OccupancyMap, size: int, count: int, seed: int, threa
     rng = np.random.default_rng(seed + 1000)
     # the scans drawn first: the peak is then what a server holding this map reaches
     truths = sample_free_poses(m, count, rng, clearance=0.5)
-    scans = [simulate_scan(m, truth, 270.0, 541, 20.0, noise_std=0.01, dropout=0.01, rng=rng) for truth in truths]
+    laser = LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.01)
+    scans = [simulate_scan(m, truth, laser, rng=rng) for truth in truths]
     loc = Localizer(m)
     loc.matcher('bnb')
     rows = []

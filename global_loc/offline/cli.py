@@ -27,6 +27,7 @@ from ..core.paths import default_map_yaml
 from ..core.scan import Scan, ScanError, scan_to_points
 from ..core.transform import Rigid2D, pose_error
 from ..core.view import ViewConfig
+from ..sim.laser import LaserConfig
 from ..sim.raycast import sample_free_poses, simulate_scan
 
 
@@ -209,9 +210,9 @@ def simulate_main(args) -> int:
     occupancy_map = load_map_yaml(args.map)
     rng = np.random.default_rng(args.seed)
     beams = args.beams or int(round(args.fov / 0.5)) + (0 if args.fov >= 360 else 1)
+    laser = LaserConfig(args.fov, beams, range_max=args.range, noise_std=args.noise, dropout=args.dropout)
     for pose in sample_free_poses(occupancy_map, args.count, rng):
-        scan = simulate_scan(occupancy_map, pose, args.fov, beams, args.range, noise_std=args.noise,
-                             dropout=args.dropout, rng=rng)
+        scan = simulate_scan(occupancy_map, pose, laser, rng=rng)
         print(json.dumps({**scan.to_dict(), 'truth': pose.as_dict()}))
     return 0
 
