@@ -199,9 +199,10 @@ def localize_scans(args, localizer, scans, fields: dict) -> int:
         if args.plot:
             stem, ext = os.path.splitext(args.plot)
             path = args.plot if n == 1 else f'{stem}_{n:03d}{ext or ".png"}'
-            from .plot import plot_localization
-            plot_localization(path, localizer.map, scan_to_points(scan).points, result.pose, truth,
-                              result.hypotheses, title=f'{fields["method"]}: {result.message}')
+            from .plot import DrawnPoses, plot_localization
+            plot_localization(path, localizer.map, scan_to_points(scan).points,
+                              DrawnPoses(result.pose, truth, result.hypotheses),
+                              title=f'{fields["method"]}: {result.message}')
     return 0
 
 
