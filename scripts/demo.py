@@ -19,7 +19,7 @@ from global_loc.core.map_io import load_map_yaml
 from global_loc.core.paths import default_map_yaml
 from global_loc.core.scan import scan_to_points
 from global_loc.core.transform import CORRECT_XY_M, CORRECT_YAW_DEG, format_pose, pose_correct, pose_error
-from global_loc.offline.plot import plot_localization
+from global_loc.offline.plot import DrawnPoses, plot_localization
 from global_loc.ros.convert import pose_from_msg, scan_from_msg
 from global_loc.sim.raycast import sample_free_poses
 from global_loc.sim.simulator import BASE_T_LASER
@@ -67,8 +67,8 @@ def main():
         scans = recorder.messages['/scan']
         if scans:
             path = os.path.join(out_dir, 'demo.png')
-            plot_localization(path, occupancy_map, scan_to_points(scan_from_msg(scans[-1])).points, estimate,
-                              truth, base_T_laser=BASE_T_LASER, title=f'global_loc demo, seed {seed}')
+            plot_localization(path, occupancy_map, scan_to_points(scan_from_msg(scans[-1])).points,
+                              DrawnPoses(estimate, truth), BASE_T_LASER, title=f'global_loc demo, seed {seed}')
             print(f'picture:        {path}')
         print(f'logs:           {logs}')
     finally:

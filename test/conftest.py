@@ -46,12 +46,15 @@ def seeded_office_scans(count: int):
     270 deg / 20 m office scans (1 cm noise, 2% dropouts; the seed, length and order fix them)."""
     import numpy as np
 
+    from global_loc.sim.laser import LaserConfig
     from global_loc.sim.raycast import sample_free_poses, simulate_scan
     office = load_map_yaml(OFFICE_YAML)
     rng = np.random.default_rng(0)
     scans = []
     for pose in sample_free_poses(office, 20, rng)[:count]:
-        scans.append((simulate_scan(office, pose, 270, 541, 20.0, noise_std=0.01, dropout=0.02, rng=rng), pose))
+        scans.append((simulate_scan(office, pose,
+                                    LaserConfig(270, 541, range_max=20.0, noise_std=0.01, dropout=0.02),
+                                    rng=rng), pose))
     return office, scans
 
 

@@ -15,6 +15,7 @@ from global_loc.core.map_io import load_map_yaml
 from global_loc.core.transform import Rigid2D
 from global_loc.ros.convert import scan_to_msg
 from global_loc.ros.node_main import run_node
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import simulate_scan
 
 
@@ -30,8 +31,8 @@ def main():
         pub = node.create_publisher(LaserScan, '/scan', 5)
 
         def tick():
-            scan = simulate_scan(occupancy_map, Rigid2D(x, y, yaw), 270.0, 541, 20.0, noise_std=0.01, dropout=0.02,
-                                 rng=rng)
+            scan = simulate_scan(occupancy_map, Rigid2D(x, y, yaw),
+                                 LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.02), rng=rng)
             if mode == 'upside_down':
                 scan.ranges = scan.ranges[::-1]
             msg = scan_to_msg(scan, 'laser', node.get_clock().now().to_msg())

@@ -26,6 +26,7 @@ from global_loc.core.transform import Rigid2D
 from global_loc.ros.cloud import cloud_to_msg
 from global_loc.ros.convert import scan_to_msg
 from global_loc.ros.node_main import run_node
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import simulate_scan
 
 
@@ -61,8 +62,9 @@ def main():
                     pubs[s['topic']].publish(broken_cloud(s['kind'], now.to_msg()))
                     continue
                 mount = Mount3D.from_values(s.get('mount', [0.0] * 6))
-                scan = simulate_scan(occupancy_map, truth * mount.upright(), s.get('fov', 270.0), s.get('beams', 541),
-                                     s.get('range_max', 20.0), noise_std=0.01, rng=rng)
+                laser = LaserConfig(s.get('fov', 270.0), s.get('beams', 541), range_max=s.get('range_max', 20.0),
+                                    noise_std=0.01, dropout=0.0)
+                scan = simulate_scan(occupancy_map, truth * mount.upright(), laser, rng=rng)
                 offset = s.get('stamp_offset_s', 0.0)
                 stamp = (now + Duration(seconds=offset) if offset >= 0 else
                          Time(nanoseconds=now.nanoseconds - int(-offset * 1e9))).to_msg()

@@ -19,7 +19,7 @@ from ros_helpers import TRUTH, ApiLocalizer, start_scan_publisher
 from conftest import OFFICE_YAML, assert_pose_near, symmetric_room
 from global_loc.core.map_io import save_map_yaml
 from global_loc.core.outcome import Outcome, Stage
-from global_loc.ros.api import NoServer, ServerGone
+from global_loc.ros.api import LocalizeGoal, NoServer, ServerGone
 from global_loc.sim.simulator import BASE_T_LASER
 from global_loc.testing.processes import (
     TopicRecorder,
@@ -155,7 +155,7 @@ def test_localize_returns_a_typed_result(office):
     api, _, _ = office
     assert api.wait_until_active(60.0)
     stages = []
-    result = api.localize(timeout_s=10.0, publish=False, feedback=lambda f: stages.append(f.stage))
+    result = api.localize(LocalizeGoal(timeout_s=10.0, publish=False), feedback=lambda f: stages.append(f.stage))
     assert result.outcome == Outcome.LOCALIZED and result.success and result.status == 'succeeded', result
     assert_pose_near(result.pose, TRUTH)
     assert result.covariance.shape == (3, 3) and np.all(np.diag(result.covariance) > 0)
@@ -169,8 +169,8 @@ def test_localize_returns_a_typed_result(office):
 def test_a_search_prior_restricts_the_answer(office):
     api, _, _ = office
     assert api.wait_until_active(60.0)
-    result = api.localize(near=(TRUTH.x + 0.3, TRUTH.y, TRUTH.yaw), radius_m=1.0, yaw_tolerance_deg=30,
-                          timeout_s=10.0, publish=False)
+    result = api.localize(LocalizeGoal(near=(TRUTH.x + 0.3, TRUTH.y, TRUTH.yaw), radius_m=1.0, yaw_tolerance_deg=30,
+                                       timeout_s=10.0, publish=False))
     assert result.success, result
     assert all(p.distance_to(TRUTH)[0] < 1.5 for p, _ in result.hypotheses)
 
@@ -184,7 +184,7 @@ def test_cancel_from_a_feedback_callback_ends_the_goal_canceled(office):
             api.cancel()
 
     t0 = time.monotonic()
-    result = api.localize(method='template_ccoeff', angle_step_deg=0.2, timeout_s=10.0, publish=False,
+    result = api.localize(LocalizeGoal(method='template_ccoeff', angle_step_deg=0.2, timeout_s=10.0, publish=False),
                           feedback=cancel_when_matching)
     assert result.outcome == Outcome.CANCELED and result.status == 'canceled' and not result.success, result
     assert result.pose is None and time.monotonic() - t0 < 20
@@ -204,27 +204,30 @@ def test_an_exception_in_the_feedback_callback_cancels_the_goal(office):
     before = server.output().count('published on /initialpose')
     canceled = server.output().count('global_loc_server]: canceled')
     with pytest.raises(RuntimeError, match='feedback callback'):
-        api.localize(method='template_ccoeff', angle_step_deg=0.2, timeout_s=10.0, feedback=broken)
+        api.localize(LocalizeGoal(method='template_ccoeff', angle_step_deg=0.2, timeout_s=10.0), feedback=broken)
     deadline = time.monotonic() + 10
     while server.output().count('global_loc_server]: canceled') == canceled and time.monotonic() < deadline:
         time.sleep(0.05)
     assert server.output().count('global_loc_server]: canceled') == canceled + 1, server.output()
-    result = api.localize(timeout_s=10.0, publish=False)
+    result = api.localize(LocalizeGoal(timeout_s=10.0, publish=False))
     assert result.success, (result, server.output())
     assert server.output().count('published on /initialpose') == before, server.output()
 
 
 BAD_TYPES = [dict(method=5), dict(method=b'bnb'), dict(timeout_s='5'), dict(near=(1.0, 2.0)), dict(near='origin'),
-             dict(publish='yes'), dict(radius_m=None), dict(feedback=3)]
+             dict(publish='yes'), dict(radius_m=None), dict(maps='floor_1'), dict(feedback=3), dict(goal='bnb')]
 
 
 def test_a_goal_field_of_the_wrong_type_is_a_type_error_not_an_abort():
     """Checked before the message is built (the generated conversion aborts the process on
-    method=5): in a subprocess, so an abort would not take the test run with it."""
-    code = ('import rclpy\nfrom global_loc.ros.api import GlobalLocalizer\nrclpy.init()\n'
+    method=5): a goal's fields when the LocalizeGoal is made, `feedback` and the goal itself
+    by localize(). In a subprocess, so an abort would not take the test run with it."""
+    code = ('import rclpy\nfrom global_loc.ros.api import GlobalLocalizer, LocalizeGoal\nrclpy.init()\n'
             'loc = GlobalLocalizer(server_timeout_s=0.5)\n'
             f'for bad in {BAD_TYPES!r}:\n'
-            '    try:\n        loc.localize(**bad)\n    except TypeError as e:\n        print("TypeError:", e)\n'
+            '    try:\n'
+            '        loc.localize(**bad) if {"feedback", "goal"} & set(bad) else loc.localize(LocalizeGoal(**bad))\n'
+            '    except TypeError as e:\n        print("TypeError:", e)\n'
             'loc.destroy_node()\nrclpy.shutdown()\n')
     out = subprocess.run([sys.executable, '-c', code], env=isolated_env(), capture_output=True, text=True, timeout=60)
     lines = out.stdout.splitlines()
@@ -237,7 +240,7 @@ def test_cancel_from_another_thread(office):
     api, _, _ = office
     assert api.wait_until_active(60.0)
     threading.Timer(1.0, api.cancel).start()
-    result = api.localize(timeout_s=10.0, publish=False, method='template_ccoeff', angle_step_deg=0.2)
+    result = api.localize(LocalizeGoal(timeout_s=10.0, publish=False, method='template_ccoeff', angle_step_deg=0.2))
     assert result.outcome == Outcome.CANCELED and result.status == 'canceled', result
 
 
@@ -280,7 +283,7 @@ def test_a_server_gone_mid_goal_is_a_clear_error(tmp_path):
         threading.Timer(1.0, lambda: os.killpg(server.proc.pid, signal.SIGKILL)).start()
         t0 = time.monotonic()
         with pytest.raises(ServerGone, match='disappeared'):
-            localizer.api.localize(timeout_s=50.0)    # no scan comes: the goal waits until the server dies
+            localizer.api.localize(LocalizeGoal(timeout_s=50.0))   # no scan comes: the goal waits until the server dies
         # a killed process says no goodbye: DDS drops it from the graph when its lease
         # expires (Fast DDS: 20 s), then SERVER_GONE_S
         assert time.monotonic() - t0 < 40.0
@@ -343,7 +346,7 @@ def test_a_goal_request_or_result_lost_in_discovery_is_asked_again():
     server = LossyServer(env)
     localizer = ApiLocalizer(env, server_timeout_s=20.0)
     try:
-        result = localizer.api.localize(timeout_s=1.0)
+        result = localizer.api.localize(LocalizeGoal(timeout_s=1.0))
         assert result.outcome == Outcome.LOCALIZED and result.message == 'localized (stand-in)', result
         assert (server.goal_requests, server.executed, server.result_requests) == (2, 1, 2)
     finally:

@@ -16,6 +16,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from conftest import OFFICE_YAML
 from global_loc.core.transform import Rigid2D, pose_correct
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import simulate_scan
 
 POSES = [Rigid2D(3.0, 4.0, 0.7), Rigid2D(12.0, 8.0, -2.0), Rigid2D(20.0, 12.5, 2.5)]
@@ -38,7 +39,8 @@ def write_bag(path, storage, office_map, topic='/scan', msgtype='sensor_msgs/msg
         conn = writer.add_connection(topic, msgtype, typestore=TYPES)
         other = writer.add_connection('/chatter', 'std_msgs/msg/String', typestore=TYPES)
         for i, pose in enumerate(POSES):
-            scan = simulate_scan(office_map, pose, 270.0, 541, 20.0, noise_std=0.01, rng=rng)
+            scan = simulate_scan(office_map, pose,
+                                 LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.0), rng=rng)
             msg = laser_scan(scan, 100 + i) if msgtype.endswith('LaserScan') else TYPES.types[msgtype](data='x')
             writer.write(conn, (100 + i) * 10**9, TYPES.serialize_cdr(msg, msgtype))
             writer.write(other, (100 + i) * 10**9 + 1, TYPES.serialize_cdr(TYPES.types['std_msgs/msg/String'](
@@ -117,7 +119,8 @@ def write_mounted_bag(path, office_map, with_tf=True, upside_down=False):
                           transform('base_link', 'shell_link', SHELL_ON_BASE, 0.1, 100 + i)]
                 message = TYPES.types[tf_type](transforms=moving)
                 writer.write(tf, (100 + i) * 10**9, TYPES.serialize_cdr(message, tf_type))
-            scan = simulate_scan(office_map, base * LASER_ON_BASE, 270.0, 541, 20.0, noise_std=0.01, rng=rng)
+            scan = simulate_scan(office_map, base * LASER_ON_BASE,
+                                 LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.0), rng=rng)
             if upside_down:
                 scan = replace(scan, ranges=scan.ranges[::-1])
             writer.write(scans, (100 + i) * 10**9 + 5,

@@ -26,6 +26,7 @@ from global_loc.core.outcome import Outcome
 from global_loc.core.scan import scan_to_points
 from global_loc.core.transform import Rigid2D, pose_error
 from global_loc.sim.changes import changed_world
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import sample_free_poses, simulate_scan
 
 
@@ -47,7 +48,7 @@ def test_branch_and_bound_finds_the_brute_force_maximum_and_every_pose_near_it(s
     m = small_room()
     rng = np.random.default_rng(seed)
     truth = sample_free_poses(m, 1, rng, clearance=0.3)[0]
-    scan = simulate_scan(m, truth, 270.0, 271, 4.0, noise_std=0.01, rng=rng)
+    scan = simulate_scan(m, truth, LaserConfig(270.0, 271, range_max=4.0, noise_std=0.01, dropout=0.0), rng=rng)
     # the narrow band (band_allowance 0.03: the default's whole keep_ratio band is the same search, wider)
     options = BranchAndBoundOptions(levels=4, band_allowance=0.03)
     matcher = BranchAndBoundMatcher(m, options, slice_expansions=slice_expansions)
@@ -76,7 +77,8 @@ def test_branch_and_bound_finds_the_brute_force_maximum_and_every_pose_near_it(s
 def test_bounds_are_never_below_the_leaves_under_them(plane_memory_mb):
     m = small_room()
     rng = np.random.default_rng(5)
-    scan = simulate_scan(m, Rigid2D(1.0, 2.0, 0.3), 360.0, 360, 4.0, rng=rng)
+    scan = simulate_scan(m, Rigid2D(1.0, 2.0, 0.3),
+                         LaserConfig(360.0, 360, range_max=4.0, noise_std=0.0, dropout=0.0), rng=rng)
     matcher = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=5, plane_memory_mb=plane_memory_mb))
     pts = matcher.prepare(scan_to_points(scan).points)
     n = 512     # a point at the scan's largest range moves just under a cell per angle step
@@ -99,7 +101,8 @@ def test_planes_over_their_memory_budget_are_stored_coarser_and_the_search_finds
     leaves, hypotheses and scores."""
     m = small_room()
     rng = np.random.default_rng(7)
-    scan = simulate_scan(m, sample_free_poses(m, 1, rng, clearance=0.3)[0], 270.0, 271, 4.0, noise_std=0.01, rng=rng)
+    scan = simulate_scan(m, sample_free_poses(m, 1, rng, clearance=0.3)[0],
+                         LaserConfig(270.0, 271, range_max=4.0, noise_std=0.01, dropout=0.0), rng=rng)
     default = BranchAndBoundMatcher(m, BranchAndBoundOptions(levels=5))
     budget = (default.stack.planes.flat.nbytes + 1) / 1e6      # (+1 byte: MB rounding)
     results = {}
@@ -140,7 +143,8 @@ def test_bnb_localizes_raycast_scans_on_the_office(office_map):
     localizer = Localizer(office_map)
     rng = np.random.default_rng(2026)
     for truth in sample_free_poses(office_map, 4, rng):
-        scan = simulate_scan(office_map, truth, 270.0, 541, 20.0, noise_std=0.01, dropout=0.02, rng=rng)
+        scan = simulate_scan(office_map, truth,
+                             LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.02), rng=rng)
         result = localizer.localize(scan, method='bnb')
         assert_pose_near(result.pose, truth, 0.1, 2.0)
         # the search's statistics reach the result; its time is part of the localization's
@@ -151,7 +155,9 @@ def test_bnb_localizes_raycast_scans_on_the_office(office_map):
 def test_four_fold_symmetric_room_is_ambiguous_with_the_truth_among_the_hypotheses():
     m = symmetric_room()
     truth = Rigid2D(2.0, 1.4, 0.4)
-    scan = simulate_scan(m, truth, 360.0, 720, 10.0, noise_std=0.005, rng=np.random.default_rng(3))
+    scan = simulate_scan(m, truth,
+                         LaserConfig(360.0, 720, range_max=10.0, noise_std=0.005, dropout=0.0),
+                         rng=np.random.default_rng(3))
     result = Localizer(m).localize(scan, method='bnb')
     assert not result.success
     assert result.outcome == Outcome.AMBIGUOUS and result.message.startswith('ambiguous')
@@ -168,7 +174,9 @@ def test_identical_aisles_are_ambiguous_with_the_truth_and_its_twins_among_the_h
     m = aisles()
     truth = Rigid2D(8.5, 2.25, 0.0)
     twins = [truth, Rigid2D(8.5, 3.75, 0.0), Rigid2D(3.5, 3.75, math.pi), Rigid2D(3.5, 2.25, math.pi)]
-    scan = simulate_scan(m, truth, 180.0, 361, 4.0, noise_std=0.005, rng=np.random.default_rng(7))
+    scan = simulate_scan(m, truth,
+                         LaserConfig(180.0, 361, range_max=4.0, noise_std=0.005, dropout=0.0),
+                         rng=np.random.default_rng(7))
     result = Localizer(m).localize(scan, method='bnb')
     assert result.outcome == Outcome.AMBIGUOUS
     assert not result.success and result.message.startswith('ambiguous: 3 other place(s)'), result.message
@@ -178,7 +186,9 @@ def test_identical_aisles_are_ambiguous_with_the_truth_and_its_twins_among_the_h
 
 def test_confident_result_has_a_positive_definite_covariance_from_the_landscape(office_map):
     truth = Rigid2D(3.0, 4.0, 0.7)
-    scan = simulate_scan(office_map, truth, 270.0, 541, 20.0, noise_std=0.01, rng=np.random.default_rng(4))
+    scan = simulate_scan(office_map, truth,
+                         LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.0),
+                         rng=np.random.default_rng(4))
     result = Localizer(office_map).localize(scan, method='bnb')
     assert result.outcome == Outcome.LOCALIZED and result.message.startswith('localized') and result.confidence >= 0.5
     cov = result.covariance
@@ -209,7 +219,9 @@ def test_a_match_whose_beams_pass_through_walls_is_ranked_below_one_that_does_no
     world = twin_rooms(door_b_closed=False, chair_in='A')
     mapped = twin_rooms(door_b_closed=True, chair_in='B')
     truth = Rigid2D(4.0, 3.4, -math.pi / 2 + 0.2)
-    scan = simulate_scan(world, truth, 270.0, 541, 6.0, noise_std=0.005, rng=np.random.default_rng(7))
+    scan = simulate_scan(world, truth,
+                         LaserConfig(270.0, 541, range_max=6.0, noise_std=0.005, dropout=0.0),
+                         rng=np.random.default_rng(7))
     matcher = BranchAndBoundMatcher(mapped)
     candidates = matcher.match(scan_to_points(scan), MatchOptions()).candidates
     twin_in_b = Rigid2D(truth.x + 14.0, truth.y, truth.yaw)
@@ -229,8 +241,8 @@ def test_equal_scores_give_the_same_hypotheses_whatever_the_threads(threads, ope
     exactly alike, and which of them a peak is reported at must not depend on which
     thread found it first."""
     m = grid_map(walled(40, 240))
-    scan = simulate_scan(m, Rigid2D(6.0, 1.0, math.pi / 2), 60.0, 61, 4.0, noise_std=0.0,
-                         rng=np.random.default_rng(3))
+    scan = simulate_scan(m, Rigid2D(6.0, 1.0, math.pi / 2),
+                         LaserConfig(60.0, 61, range_max=4.0, noise_std=0.0, dropout=0.0), rng=np.random.default_rng(3))
     points = scan_to_points(scan)
     results = []
     for n, slice_expansions in ((1, 20000), (threads, 5)):
@@ -248,7 +260,8 @@ def test_a_search_stopped_before_any_leaf_still_returns_its_best_leaf_as_a_hypot
     is `search incomplete` with the best of what was explored - never an empty list."""
     rng = np.random.default_rng(5)
     truth = sample_free_poses(office_map, 1, rng, clearance=0.5)[0]
-    scan = simulate_scan(changed_world(office_map, 3, truth, rng), truth, 270.0, 541, 20.0, noise_std=0.01, rng=rng)
+    scan = simulate_scan(changed_world(office_map, 3, truth, rng), truth,
+                         LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.0), rng=rng)
     result = Localizer(office_map, LocalizerConfig(**limit)).localize(scan, method='bnb')
     assert result.outcome == Outcome.SEARCH_INCOMPLETE and not result.success
     assert 'best of what was explored, see the hypotheses' in result.message
@@ -270,7 +283,8 @@ def test_the_covariance_of_a_real_log_like_scan_covers_its_error(office_map):
     rng = np.random.default_rng(7)
     d2 = []
     for pose in sample_free_poses(office_map, 12, rng, clearance=0.5):
-        result = shifted.localize(simulate_scan(office_map, pose, 270, 541, 20.0, noise_std=0.02, dropout=0.02,
+        result = shifted.localize(simulate_scan(office_map, pose,
+                                                LaserConfig(270, 541, range_max=20.0, noise_std=0.02, dropout=0.02),
                                                 rng=rng))
         if result.success:
             e = np.array([result.pose.x - pose.x, result.pose.y - pose.y,

@@ -19,6 +19,7 @@ from global_loc.core.matchers.bnb.verdict import confident_fit
 from global_loc.core.outcome import Outcome
 from global_loc.core.scan import scan_to_points
 from global_loc.sim.changes import changed_world
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import sample_free_poses, simulate_scan
 
 
@@ -35,12 +36,14 @@ def cases(office_map, seed: int):
     explain them)."""
     rng = np.random.default_rng(seed)
     for truth in sample_free_poses(office_map, 2, rng, clearance=0.5):
-        scan = simulate_scan(office_map, truth, 270.0, 541, 20.0, rng=rng)
+        scan = simulate_scan(office_map, truth,
+                             LaserConfig(270.0, 541, range_max=20.0, noise_std=0.0, dropout=0.0), rng=rng)
         yield office_map, dataclasses.replace(scan, ranges=rng.uniform(0.5, 8.0, len(scan.ranges)))
     for level in (0, 0, 0, 0, 2, 3):
         truth = sample_free_poses(office_map, 1, rng, clearance=0.5)[0]
         world = changed_world(office_map, level, truth, rng) if level else office_map
-        yield office_map, simulate_scan(world, truth, 270.0, 541, 20.0, noise_std=0.01, rng=rng)
+        yield office_map, simulate_scan(world, truth,
+                                        LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.0), rng=rng)
 
 
 def test_the_poor_match_floor_never_changes_an_answer_that_could_be_confident(office_map):

@@ -19,6 +19,7 @@ from global_loc.core.outcome import Outcome
 from global_loc.core.scan import scan_to_points
 from global_loc.core.transform import Rigid2D
 from global_loc.sim.changes import changed_world
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import sample_free_poses, simulate_scan
 
 NARROW = dict(band_allowance=0.03)
@@ -55,8 +56,8 @@ def scans(seed: int, count: int):
     rng = np.random.default_rng(seed)
     room = small_room()
     for truth in sample_free_poses(room, count, rng, clearance=0.3):
-        yield room, dict(levels=4), scan_to_points(simulate_scan(room, truth, 270.0, 271, 4.0, noise_std=0.01,
-                                                                 rng=rng))
+        laser = LaserConfig(270.0, 271, range_max=4.0, noise_std=0.01, dropout=0.0)
+        yield room, dict(levels=4), scan_to_points(simulate_scan(room, truth, laser, rng=rng))
 
 
 @pytest.mark.parametrize('threads, slice_expansions', [(1, 20000), (2, 20000), (2, 7)])
@@ -68,8 +69,8 @@ def test_a_resumed_search_ends_exactly_as_one_with_the_lower_floor_from_the_star
     for level in (0, 3):       # the office as mapped, and heavily changed (low fits, rivals)
         truth = sample_free_poses(office_map, 1, rng, clearance=0.5)[0]
         world = changed_world(office_map, level, truth, rng) if level else office_map
-        cases.append((office_map, {}, scan_to_points(simulate_scan(world, truth, 270.0, 541, 20.0, noise_std=0.01,
-                                                                   rng=rng))))
+        laser = LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.0)
+        cases.append((office_map, {}, scan_to_points(simulate_scan(world, truth, laser, rng=rng))))
     for m, extra, points in cases:
         resumed = forced(BranchAndBoundMatcher(m, BranchAndBoundOptions(**extra, **NARROW), slice_expansions),
                          True)
@@ -98,7 +99,8 @@ def test_the_rule_resumes_a_confident_answer_whose_rivals_the_band_may_have_cut(
     REFINED_GAIN higher, could come within the 5% lead: the rule resumes, and the answer
     is the whole band's."""
     truth = Rigid2D(12.0, 8.0, -2.0)
-    points = scan_to_points(simulate_scan(office_map, truth, 270.0, 541, 20.0, noise_std=0.01,
+    points = scan_to_points(simulate_scan(office_map, truth,
+                                          LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.0),
                                           rng=np.random.default_rng(4)))
     narrow = BranchAndBoundMatcher(office_map, BranchAndBoundOptions(**NARROW))
     whole = BranchAndBoundMatcher(office_map)

@@ -17,6 +17,7 @@ from global_loc.core.matchers.bnb.verdict import confident_fit, judge, keep_floo
 from global_loc.core.outcome import Outcome
 from global_loc.core.scan import scan_to_points
 from global_loc.core.transform import Rigid2D
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import simulate_scan
 
 OPTIONS = BranchAndBoundOptions()
@@ -83,8 +84,11 @@ def test_one_search_leaves_nothing_for_the_next():
     room = small_room()
     matcher = BranchAndBoundMatcher(room, BranchAndBoundOptions(levels=4, max_nodes=3000))
     rng = np.random.default_rng(2)
-    distinctive = scan_to_points(simulate_scan(room, Rigid2D(1.0, 2.0, 0.3), 360.0, 360, 4.0, rng=rng))
-    glimpse = scan_to_points(simulate_scan(room, Rigid2D(2.0, 1.0, -math.pi / 2), 30.0, 31, 2.0, rng=rng))
+    distinctive = scan_to_points(simulate_scan(room, Rigid2D(1.0, 2.0, 0.3),
+                                               LaserConfig(360.0, 360, range_max=4.0, noise_std=0.0, dropout=0.0),
+                                               rng=rng))
+    glimpse = scan_to_points(simulate_scan(room, Rigid2D(2.0, 1.0, -math.pi / 2),
+                                           LaserConfig(30.0, 31, range_max=2.0, noise_std=0.0, dropout=0.0), rng=rng))
     first = matcher.match(distinctive, MatchOptions())
     stopped = matcher.match(glimpse, MatchOptions())
     again = matcher.match(distinctive, MatchOptions())
@@ -100,7 +104,8 @@ def test_distinct_hypotheses_are_decided_once_in_metres_and_judged_as_the_matche
     hypotheses are places 0.5 m apart - the verdict judges them and the Localizer presents
     them as the matcher returned them (no second pass merges places closer than 1 m)."""
     room = grid_map(walled(60, 240))      # 12 x 3 m at 5 cm
-    scan = simulate_scan(room, Rigid2D(6.0, 1.5, math.pi / 2), 40.0, 81, 2.0, noise_std=0.0)
+    scan = simulate_scan(room, Rigid2D(6.0, 1.5, math.pi / 2),
+                         LaserConfig(40.0, 81, range_max=2.0, noise_std=0.0, dropout=0.0))
     localizer = Localizer(room, LocalizerConfig(bnb=BranchAndBoundOptions(distinct_m=0.5)))
     result = localizer.localize(scan)
     found = localizer.matcher('bnb').match(scan_to_points(scan), MatchOptions())

@@ -7,7 +7,7 @@ import pytest
 
 from global_loc.core.frames import compose, transform_matrix
 from global_loc.core.mount3d import Mount3D
-from global_loc.core.transform import quaternion_of_rpy, rotation_of_quaternion
+from global_loc.core.transform import Quaternion, quaternion_of_rpy, rotation_of_quaternion
 
 ANGLES = [(0.0, 0.0, 0.0), (math.pi, 0.0, 0.0), (0.0, 0.0, math.pi), (0.3, -0.4, 2.5), (-1.2, 0.7, -3.0),
           (0.2, math.pi / 2, 0.5)]      # the last: pointing straight down, where roll and yaw blur
@@ -18,7 +18,7 @@ def test_a_quaternion_made_from_angles_is_the_rotation_of_those_angles(rpy):
     q = quaternion_of_rpy(*rpy)
     assert np.linalg.norm(q) == pytest.approx(1.0)
     assert np.allclose(rotation_of_quaternion(*q), Mount3D(0, 0, 0, *rpy).rotation(), atol=1e-12)
-    assert np.allclose(Mount3D.from_quaternion(0, 0, 0, *q).rotation(), Mount3D(0, 0, 0, *rpy).rotation(),
+    assert np.allclose(Mount3D.from_quaternion(0, 0, 0, Quaternion(*q)).rotation(), Mount3D(0, 0, 0, *rpy).rotation(),
                        atol=1e-9)
 
 

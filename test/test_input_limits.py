@@ -18,7 +18,8 @@ from global_loc.core.matchers import MatchOptions
 from global_loc.core.mount import LaserMount, MountError
 from global_loc.core.scan import Scan, ScanError, scan_to_points
 from global_loc.core.search_region import SearchRegion
-from global_loc.core.transform import Rigid2D, pose_correct
+from global_loc.core.transform import Quaternion, Rigid2D, pose_correct
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import raycast_ranges, simulate_scan
 from global_loc.sim.synthetic_maps import small_room
 
@@ -129,7 +130,7 @@ def test_mount_from_tf_reads_the_x_axis_heading_and_upside_down():
     assert same.upside_down and same.base_T_laser.yaw == pytest.approx(0.7)
     # a quaternion with roll pi about x, then yaw 0.7: q = qz(0.7) * qx(pi)
     c, s = math.cos(0.35), math.sin(0.35)
-    from_q = LaserMount.from_quaternion(0.2, -0.1, c, s, 0.0, 0.0)     # (x, y, z, w) = (cos, sin, 0, 0)
+    from_q = LaserMount.from_quaternion(0.2, -0.1, Quaternion(c, s, 0.0, 0.0))
     assert from_q.upside_down and from_q.base_T_laser.yaw == pytest.approx(0.7)
     assert LaserMount.from_roll_pitch_yaw(0, 0, math.radians(178), 0, 0).upside_down   # within the tilt bound
 
@@ -161,7 +162,7 @@ def test_an_upside_down_laser_localizes_right(method, base):
     room = small_room()
     mount = LaserMount.from_roll_pitch_yaw(0.25, 0.0, math.pi, 0.0, 0.0)
     laser_pose = base * mount.base_T_laser
-    upright_scan = simulate_scan(room, laser_pose, 240.0, 481, 8.0)
+    upright_scan = simulate_scan(room, laser_pose, LaserConfig(240.0, 481, range_max=8.0, noise_std=0.0, dropout=0.0))
     angles = upright_scan.angles()
     # what the upside-down laser reports: beam i at laser angle angles[i] sees the room at -angles[i]
     raw = Scan(upright_scan.angle_min, upright_scan.angle_increment, upright_scan.range_min,
@@ -178,7 +179,8 @@ def test_an_upside_down_laser_localizes_right(method, base):
 @pytest.fixture(scope='module')
 def room_scan():
     room = small_room()
-    return room, scan_to_points(simulate_scan(room, Rigid2D(2.5, 2.2, -0.6), 240.0, 481, 8.0))
+    return room, scan_to_points(simulate_scan(room, Rigid2D(2.5, 2.2, -0.6),
+                                              LaserConfig(240.0, 481, range_max=8.0, noise_std=0.0, dropout=0.0)))
 
 
 @pytest.mark.parametrize('step', [1e-3, 0.05, 0.0, -5.0, math.nan, 200.0])
@@ -250,7 +252,9 @@ def test_a_prior_tighter_than_the_search_centred_on_the_truth_localizes_and_says
     room = small_room()
     localizer = Localizer(room)
     for truth in TRUE_POSES:
-        scan = simulate_scan(room, truth, 240.0, 481, 8.0, noise_std=0.01, rng=np.random.default_rng(1))
+        scan = simulate_scan(room, truth,
+                             LaserConfig(240.0, 481, range_max=8.0, noise_std=0.01, dropout=0.0),
+                             rng=np.random.default_rng(1))
         result = localizer.localize(scan, method, region=SearchRegion(truth, radius_m, math.radians(yaw_tolerance_deg)))
         assert result.success, (truth, result.message)
         assert_pose_near(result.pose, truth, 0.1, 3.0)
@@ -267,8 +271,9 @@ def test_a_prior_tighter_than_the_search_centred_on_the_truth_localizes_and_says
 def test_the_cli_refuses_a_laser_or_bnb_flag_outside_the_servers_range(tmp_path, capsys, flag):
     from global_loc.offline.cli import main
     scans = tmp_path / 'scans.jsonl'
-    scans.write_text(json.dumps({**simulate_scan(small_room(), Rigid2D(2.0, 2.0, 0.3), 270, 541, 10.0).to_dict()})
-                     + '\n')
+    scan = simulate_scan(small_room(), Rigid2D(2.0, 2.0, 0.3),
+                         LaserConfig(270, 541, range_max=10.0, noise_std=0.0, dropout=0.0))
+    scans.write_text(json.dumps({**scan.to_dict()}) + '\n')
     assert main(['localize', '--map', write_room(tmp_path), '--scans', str(scans), *flag]) == 2
     out, err = capsys.readouterr()
     assert out == '' and re.search(r'error: .*must be in \[', err), err
@@ -297,7 +302,8 @@ def test_a_result_refuses_a_non_finite_pose_whichever_way_it_is_given():
 @pytest.mark.parametrize('method', ['bnb', 'template_ccoeff'])
 def test_a_non_finite_laser_mounting_is_an_unusable_scan_not_a_nan_pose(method):
     room = small_room()
-    scan = simulate_scan(room, Rigid2D(2.0, 2.0, 0.3), 270, 541, 10.0)
+    scan = simulate_scan(room, Rigid2D(2.0, 2.0, 0.3),
+                         LaserConfig(270, 541, range_max=10.0, noise_std=0.0, dropout=0.0))
     for mount in (Rigid2D(float('nan'), 0.0, 0.0), Rigid2D(0.0, 0.0, float('inf'))):
         with pytest.raises(MountError, match='must be finite'):
             Localizer(room).localize(scan, method=method, base_T_laser=mount)

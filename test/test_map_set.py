@@ -6,8 +6,9 @@ import pytest
 from conftest import OFFICE_YAML, assert_pose_near, seeded_office_scans
 from global_loc.core.localizer import Localizer
 from global_loc.core.map_io import load_map_yaml, make_map
-from global_loc.core.map_set import MapSet, MapSetError, map_name, named_paths
+from global_loc.core.map_set import MapSet, MapSetError, MapSetPrior, map_name, named_paths
 from global_loc.core.outcome import Outcome
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import sample_free_poses, simulate_scan
 
 
@@ -35,7 +36,9 @@ def test_a_scan_is_localized_on_its_own_map_and_the_answer_names_it(office_and_m
             assert '(map office;' in result.message
     assert confident >= 4
     for pose in sample_free_poses(mirror.map, 3, rng, clearance=0.6):        # and one on the other map
-        result = maps.localize(simulate_scan(mirror.map, pose, 270, 541, 20.0, noise_std=0.01, rng=rng))
+        result = maps.localize(simulate_scan(mirror.map, pose,
+                                             LaserConfig(270, 541, range_max=20.0, noise_std=0.01, dropout=0.0),
+                                             rng=rng))
         assert result.success and result.map == 'mirror', result.message
         assert_pose_near(result.pose, pose)
 
@@ -48,7 +51,7 @@ def test_identical_floors_are_ambiguous_with_a_hypothesis_on_each_and_the_prior_
         assert result.outcome == Outcome.AMBIGUOUS and result.confidence < 0.5, result.message
         assert 'ambiguous between maps' in result.message
         assert {h.map for h in result.hypotheses[:2]} == {'floor_1', 'floor_2'}
-        settled = floors.localize(scan, maps=['floor_2'])        # a prior names the floor
+        settled = floors.localize(scan, prior=MapSetPrior(maps=['floor_2']))        # a prior names the floor
         assert settled.success and settled.map == 'floor_2'
         assert_pose_near(settled.pose, truth)
 
@@ -141,7 +144,8 @@ def test_identical_floors_at_different_resolutions_are_ambiguous_and_other_floor
     rng = np.random.default_rng(7)
     told_apart = 0
     for truth in sample_free_poses(office.map, 12, rng, clearance=0.4):
-        scan = simulate_scan(office.map, truth, 270, 541, 20.0, noise_std=0.01, dropout=0.02, rng=rng)
+        scan = simulate_scan(office.map, truth,
+                             LaserConfig(270, 541, range_max=20.0, noise_std=0.01, dropout=0.02), rng=rng)
         result = same.localize(scan)
         assert not result.success, (truth, result.map, result.message)
         assert {h.map for h in result.hypotheses} == {'floor_1', 'floor_2'} or result.outcome != Outcome.AMBIGUOUS

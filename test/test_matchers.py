@@ -14,6 +14,7 @@ from global_loc.core.matchers.features import FeatureMatcher, make_detector, sur
 from global_loc.core.outcome import Outcome
 from global_loc.core.scan import ScanError
 from global_loc.core.transform import Rigid2D
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import points_cut_from_map, simulate_scan
 
 # Distinctive places of the office map (furniture in view), with headings off the grid.
@@ -50,7 +51,8 @@ def test_feature_matcher_answers_the_same_whatever_drew_from_opencvs_rng_before(
 # places where it is, so a regression in the pipeline shows here.
 @pytest.mark.parametrize('truth', [Rigid2D(3.0, 4.0, 0.7), Rigid2D(18.0, 4.5, -2.2)], ids=str)
 def test_rotated_template_localizes_a_raycast_270_deg_scan(localizer, truth):
-    scan = simulate_scan(localizer.map, truth, 270.0, 541, 20.0, noise_std=0.01, dropout=0.02,
+    scan = simulate_scan(localizer.map, truth,
+                         LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.02),
                          rng=np.random.default_rng(7))
     result = localizer.localize(scan, method='template_ccoeff')
     assert_pose_near(result.pose, truth)
@@ -62,7 +64,9 @@ def test_rotated_template_localizes_a_raycast_270_deg_scan(localizer, truth):
 def test_result_pose_is_the_base_when_the_laser_is_mounted_forward(office_map):
     truth_base = Rigid2D(3.0, 4.0, 0.7)
     mount = Rigid2D(0.2, 0.0, 0.0)
-    scan = simulate_scan(office_map, truth_base * mount, 270.0, 541, 20.0, rng=np.random.default_rng(1))
+    scan = simulate_scan(office_map, truth_base * mount,
+                         LaserConfig(270.0, 541, range_max=20.0, noise_std=0.0, dropout=0.0),
+                         rng=np.random.default_rng(1))
     result = Localizer(office_map, LocalizerConfig(base_T_laser=mount)).localize(scan)
     assert_pose_near(result.pose, truth_base)
 
@@ -85,7 +89,8 @@ def test_unknown_method_and_missing_surf_are_clear_errors(localizer):
 
 
 def test_bad_scan_and_bad_angle_step_raise_before_matching(localizer):
-    scan = simulate_scan(localizer.map, Rigid2D(3.0, 4.0, 0.0), 270.0, 541, 20.0)
+    scan = simulate_scan(localizer.map, Rigid2D(3.0, 4.0, 0.0),
+                         LaserConfig(270.0, 541, range_max=20.0, noise_std=0.0, dropout=0.0))
     with pytest.raises(ValueError, match='angle step'):
         localizer.localize(scan, angle_step_deg=-5)
     scan.ranges[:] = np.nan

@@ -20,6 +20,7 @@ from conftest import OFFICE_YAML, REPO_ROOT, assert_pose_near, symmetric_room
 from global_loc.core.map_io import save_map_yaml
 from global_loc.core.outcome import Outcome
 from global_loc.core.transform import Rigid2D
+from global_loc.ros.api import LocalizeGoal
 from global_loc.ros.convert import pose_from_msg
 from global_loc.testing.processes import TopicRecorder, isolated_env, reliable, start_client, start_server
 
@@ -62,15 +63,15 @@ def test_lifecycle_manager_drives_a_server_started_without_autostart(ros, tmp_pa
     env, recorder, servers, api = ros
     servers.append(start_server(env, tmp_path / 'server.log', 'autostart:=false', ready_line='unconfigured'))
     assert state(recorder) == 'unconfigured'
-    result = api.localize(timeout_s=10)
+    result = api.localize(LocalizeGoal(timeout_s=10))
     assert result.outcome == Outcome.NOT_ACTIVE and result.status == 'aborted', result
     assert transition(recorder, Transition.TRANSITION_CONFIGURE) and state(recorder) == 'inactive'
-    assert api.localize(timeout_s=10).outcome == Outcome.NOT_ACTIVE
+    assert api.localize(LocalizeGoal(timeout_s=10)).outcome == Outcome.NOT_ACTIVE
     assert transition(recorder, Transition.TRANSITION_ACTIVATE) and state(recorder) == 'active'
-    result = api.localize(timeout_s=10)
+    result = api.localize(LocalizeGoal(timeout_s=10))
     assert result.success and result.outcome == Outcome.LOCALIZED, result
     assert transition(recorder, Transition.TRANSITION_DEACTIVATE) and state(recorder) == 'inactive'
-    assert api.localize(timeout_s=10).outcome == Outcome.NOT_ACTIVE
+    assert api.localize(LocalizeGoal(timeout_s=10)).outcome == Outcome.NOT_ACTIVE
     assert transition(recorder, Transition.TRANSITION_CLEANUP) and state(recorder) == 'unconfigured'
     assert 'cleaned up: map dropped' in servers[0].output()
 
@@ -104,10 +105,10 @@ def test_a_lifecycle_manager_asking_by_id_is_answered_and_the_server_keeps_servi
     assert server.proc.poll() is None, server.output()
     assert state(recorder) == 'active'
     assert 'change_state refused: transition id 99 is not available in state active' in server.output()
-    assert api.localize(timeout_s=10).success, server.output()
+    assert api.localize(LocalizeGoal(timeout_s=10)).success, server.output()
     assert transition(recorder, Transition.TRANSITION_DEACTIVATE) and state(recorder) == 'inactive'
     assert not transition(recorder, Transition.TRANSITION_DEACTIVATE)     # again: not from inactive
-    assert transition(recorder, Transition.TRANSITION_ACTIVATE) and api.localize(timeout_s=10).success
+    assert transition(recorder, Transition.TRANSITION_ACTIVATE) and api.localize(LocalizeGoal(timeout_s=10)).success
 
 
 def test_deactivate_during_a_goal_ends_it_and_refuses_the_next(ros, tmp_path):
@@ -127,7 +128,7 @@ def test_deactivate_during_a_goal_ends_it_and_refuses_the_next(ros, tmp_path):
     assert result['outcome'] == 'canceled' and 'stopping' in result['message'], (result, err)
     assert api.localize().outcome == Outcome.NOT_ACTIVE
     assert transition(recorder, Transition.TRANSITION_ACTIVATE)
-    assert api.localize(timeout_s=10).success
+    assert api.localize(LocalizeGoal(timeout_s=10)).success
 
 
 def test_trigger_services_localize_and_publish_and_rviz_topics_reach_a_late_subscriber(ros, tmp_path):
@@ -168,7 +169,7 @@ def test_parameters_file_is_read_and_lists_every_parameter(ros, tmp_path):
     """The shipped file starts a working server; a copy with one value changed changes it."""
     env, recorder, servers, api = ros
     servers.append(start_server(env, tmp_path / 'server.log', params_file=PARAMS_FILE))
-    assert api.localize(timeout_s=10).success
+    assert api.localize(LocalizeGoal(timeout_s=10)).success
     assert servers.pop().stop() == 0
     doc = yaml.safe_load(open(PARAMS_FILE))
     doc['global_loc_server']['ros__parameters']['bnb']['max_nodes'] = 50
@@ -176,7 +177,7 @@ def test_parameters_file_is_read_and_lists_every_parameter(ros, tmp_path):
     changed.write_text(yaml.safe_dump(doc))
     servers.append(start_server(env, tmp_path / 'server2.log', params_file=changed))
     assert api.wait_until_active(30.0)      # a goal sent right after a restart can be lost in discovery
-    result = api.localize(timeout_s=10)
+    result = api.localize(LocalizeGoal(timeout_s=10))
     assert not result.success and result.outcome == Outcome.SEARCH_INCOMPLETE, result
 
 
@@ -207,8 +208,8 @@ def test_search_prior_settles_a_symmetric_room(tmp_path):
     publisher = start_scan_publisher(env, tmp_path / 'pub.log', tmp_path / 'square.yaml', truth)
     localizer = ApiLocalizer(env)
     try:
-        assert localizer.api.localize(timeout_s=10).outcome == Outcome.AMBIGUOUS
-        result = localizer.api.localize(timeout_s=10, near=(1.5, 1.5, 0.0), radius_m=1.5)
+        assert localizer.api.localize(LocalizeGoal(timeout_s=10)).outcome == Outcome.AMBIGUOUS
+        result = localizer.api.localize(LocalizeGoal(timeout_s=10, near=(1.5, 1.5, 0.0), radius_m=1.5))
         assert result.success and result.outcome == Outcome.LOCALIZED, result
         assert_pose_near(result.pose, truth)
         assert 0 <= result.scan_age_s < 5 and result.scan_stamp > 0

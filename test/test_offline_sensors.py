@@ -14,6 +14,7 @@ from test_bag import TYPES, laser_scan, run_cli, transform
 from conftest import assert_pose_near, needs_pybullet
 from global_loc.core.cloud import pack_cloud
 from global_loc.core.transform import Rigid2D
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import simulate_scan
 from global_loc.sim.robot import LIDAR_MOUNT
 
@@ -65,7 +66,8 @@ def write_two_laser_bag(path, office_map):
         for sec, topic, mount, frame in ((100, '/scan', FRONT, 'laser'), (100.05, '/scan_rear', REAR, 'laser_rear'),
                                          (100.05, '/scan_side', FRONT, 'laser_side'),
                                          (101, '/scan', FRONT, 'laser'), (103, '/scan', FRONT, 'laser')):
-            scan = simulate_scan(office_map, TWO_LASER_POSE * mount, 100.0, 201, 8.0, noise_std=0.01, rng=rng)
+            scan = simulate_scan(office_map, TWO_LASER_POSE * mount,
+                                 LaserConfig(100.0, 201, range_max=8.0, noise_std=0.01, dropout=0.0), rng=rng)
             msg = laser_scan(scan, int(sec), frame)
             msg.header.stamp.nanosec = int(round((sec % 1) * 1e9))
             write(writer, topics[topic], sec, msg, SCAN)

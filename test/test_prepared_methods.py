@@ -11,6 +11,7 @@ from global_loc.core.localizer import Localizer
 from global_loc.core.map_io import make_map
 from global_loc.core.matchers import MethodError, make_matcher
 from global_loc.core.transform import Rigid2D
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import simulate_scan
 from global_loc.sim.synthetic_maps import small_room
 
@@ -27,7 +28,8 @@ def test_a_prepared_localizer_serves_its_methods_and_refuses_the_others_with_the
     assert localizer.prepared() == ['bnb', 'template_ccoeff'] and localizer.unavailable == {}
     built = localizer.matcher('template_ccoeff')
     assert localizer.matcher('template_ccoeff') is built
-    scan = simulate_scan(room, Rigid2D(2.0, 2.0, 0.3), 270, 541, 10.0)
+    scan = simulate_scan(room, Rigid2D(2.0, 2.0, 0.3),
+                         LaserConfig(270, 541, range_max=10.0, noise_std=0.0, dropout=0.0))
     with pytest.raises(MethodError, match='features_orb is not prepared on this server .*methods parameter'):
         localizer.localize(scan, method='features_orb')
     assert localizer.prepared() == ['bnb', 'template_ccoeff']      # nothing was built by the request

@@ -17,6 +17,7 @@ from global_loc.core.matchers.features import surf_available
 from global_loc.core.outcome import CanceledError, Outcome
 from global_loc.core.scan import Scan, ScanError
 from global_loc.core.transform import Rigid2D
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import simulate_scan
 
 METHODS = ('bnb', 'template_ccoeff', 'template_sqdiff', 'features_orb')
@@ -110,7 +111,9 @@ def test_features_surf_without_surf_is_a_method_error_before_any_work():
 
 def test_max_search_s_ends_any_search_as_incomplete():
     m = small_room()
-    scan = simulate_scan(m, Rigid2D(1.0, 2.0, 0.3), 270.0, 271, 4.0, rng=np.random.default_rng(2))
+    scan = simulate_scan(m, Rigid2D(1.0, 2.0, 0.3),
+                         LaserConfig(270.0, 271, range_max=4.0, noise_std=0.0, dropout=0.0),
+                         rng=np.random.default_rng(2))
     loc = Localizer(m, LocalizerConfig(max_search_s=0.0))
     for method, step in (('template_ccoeff', 0.1), ('bnb', None)):
         result = loc.localize(scan, method, step)
@@ -128,7 +131,9 @@ def test_a_cancel_does_not_wait_for_a_rotation_of_the_template_matcher():
     grid[:, ::70] = 100
     m = grid_map(grid)
     matcher = make_matcher('template_ccoeff', m)
-    scan = simulate_scan(m, Rigid2D(30.3, 40.1, 0.2), 270.0, 541, 20.0, rng=np.random.default_rng(3))
+    scan = simulate_scan(m, Rigid2D(30.3, 40.1, 0.2),
+                         LaserConfig(270.0, 541, range_max=20.0, noise_std=0.0, dropout=0.0),
+                         rng=np.random.default_rng(3))
     from global_loc.core.scan import scan_to_points
     cancelled_at = []
 

@@ -12,6 +12,7 @@ from global_loc.core.outcome import Outcome
 from global_loc.core.scan import scan_to_points
 from global_loc.core.search_region import SearchRegion
 from global_loc.core.transform import Rigid2D
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import sample_free_poses, simulate_scan
 
 AISLE_END = Rigid2D(8.5, 2.25, 0.0)
@@ -21,7 +22,9 @@ AISLE_END = Rigid2D(8.5, 2.25, 0.0)
 def aisle_scan():
     """At an aisle's end looking out: the other aisle's end and both half-turned ends look the same."""
     m = aisles()
-    return m, simulate_scan(m, AISLE_END, 180.0, 361, 4.0, noise_std=0.005, rng=np.random.default_rng(7))
+    return m, simulate_scan(m, AISLE_END,
+                            LaserConfig(180.0, 361, range_max=4.0, noise_std=0.005, dropout=0.0),
+                            rng=np.random.default_rng(7))
 
 
 def test_region_contains_by_distance_and_heading():
@@ -67,7 +70,9 @@ def test_a_prior_settles_the_twin_aisles_and_the_search_shrinks(aisle_scan):
 @pytest.mark.parametrize('method', ['template_ccoeff', 'features_orb'])
 def test_thesis_matchers_answer_only_inside_the_region(office_map, method):
     truth = Rigid2D(3.0, 4.0, 0.7)
-    scan = simulate_scan(office_map, truth, 270.0, 541, 20.0, noise_std=0.01, rng=np.random.default_rng(7))
+    scan = simulate_scan(office_map, truth,
+                         LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.0),
+                         rng=np.random.default_rng(7))
     region = SearchRegion(Rigid2D(12.0, 8.0, 0.0), 2.0, math.radians(45))   # elsewhere: the truth is outside
     result = Localizer(office_map).localize(scan, method=method, region=region)
     assert all(region.contains(h.pose) for h in result.hypotheses)
@@ -99,7 +104,8 @@ def test_a_heading_prior_tighter_than_the_search_localizes_as_often_as_a_loose_o
     localizer = Localizer(office_map)
     rng = np.random.default_rng(0)
     for truth in list(sample_free_poses(office_map, 8, rng))[:4]:
-        scan = simulate_scan(office_map, truth, 270, 541, 20.0, noise_std=0.01, dropout=0.02, rng=rng)
+        scan = simulate_scan(office_map, truth,
+                             LaserConfig(270, 541, range_max=20.0, noise_std=0.01, dropout=0.02), rng=rng)
         loose = localizer.localize(scan, region=SearchRegion(truth, 0.0, math.radians(0.5)))
         for tolerance in (0.01, 0.1):
             prior = SearchRegion(truth, 0.0, math.radians(tolerance))

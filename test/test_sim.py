@@ -43,7 +43,8 @@ def test_scan_agrees_with_the_numpy_ray_caster_at_a_teleported_pose(sim, office_
     sim.place(truth)
     assert sim.true_pose().distance_to(truth)[0] < 1e-6
     scan = sim.scan()
-    reference = simulate_scan(office_map, truth * BASE_T_LASER, 270.0, 541, 20.0)
+    reference = simulate_scan(office_map, truth * BASE_T_LASER,
+                              LaserConfig(270.0, 541, range_max=20.0, noise_std=0.0, dropout=0.0))
     both = np.isfinite(scan.ranges) & np.isfinite(reference.ranges)
     assert both.mean() > 0.95
     # pybullet hits the wall surface, the ray caster the cell it marches into: < 1-2 cells apart.
@@ -125,7 +126,8 @@ def test_rear_laser_looks_back_from_its_mounting(sim3d, office_map):
     truth = Rigid2D(18.0, 4.5, -2.2)
     sim3d.place(truth)
     rear = sim3d.rear_scan()
-    reference = simulate_scan(office_map, truth * BASE_T_REAR_LASER, 270.0, 541, 20.0)
+    reference = simulate_scan(office_map, truth * BASE_T_REAR_LASER,
+                              LaserConfig(270.0, 541, range_max=20.0, noise_std=0.0, dropout=0.0))
     both = np.isfinite(rear.ranges) & np.isfinite(reference.ranges)
     assert both.mean() > 0.95
     assert np.median(np.abs(rear.ranges[both] - reference.ranges[both])) < 0.05

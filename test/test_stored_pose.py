@@ -15,6 +15,7 @@ from global_loc.core.map_io import make_map
 from global_loc.core.map_set import MapSet
 from global_loc.core.scan import scan_to_points
 from global_loc.core.stored_pose import (
+    SinceStored,
     StoredPose,
     StoredPoseError,
     confirm_stored_pose,
@@ -23,9 +24,10 @@ from global_loc.core.stored_pose import (
     stored_from_result,
 )
 from global_loc.core.transform import Rigid2D
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import sample_free_poses, simulate_scan
 
-LASER = dict(fov_deg=270, num_beams=541, range_max=20.0, noise_std=0.01)
+LASER = LaserConfig(270, 541, range_max=20.0, noise_std=0.01, dropout=0.0)
 
 
 @pytest.fixture(scope='module')
@@ -72,8 +74,8 @@ def test_a_robot_that_was_not_moved_is_confirmed_on_its_map(office_set):
     rng = np.random.default_rng(11)
     by_odometry = 0
     for pose, truth in stored:
-        points = scan_to_points(simulate_scan(office, truth, rng=rng, **LASER))     # a new scan, same place
-        result, why = confirm_stored_pose(maps, points, pose, Rigid2D(), None, 60.0)
+        points = scan_to_points(simulate_scan(office, truth, LASER, rng=rng))     # a new scan, same place
+        result, why = confirm_stored_pose(maps, points, pose, Rigid2D(), SinceStored(60.0))
         assert result is not None and result.success, why
         assert result.map == 'office' and result.hypotheses[0].map == 'office'
         assert 'the stored pose confirmed (stored;' in result.message
@@ -81,9 +83,9 @@ def test_a_robot_that_was_not_moved_is_confirmed_on_its_map(office_set):
         # odometry that ran on: the stored pose is moved by it first
         moved = Rigid2D(truth.x + 0.3 * math.cos(truth.yaw), truth.y + 0.3 * math.sin(truth.yaw), truth.yaw)
         if office.is_free_at(np.array([[moved.x, moved.y]]))[0]:
-            points = scan_to_points(simulate_scan(office, moved, rng=rng, **LASER))
+            points = scan_to_points(simulate_scan(office, moved, LASER, rng=rng))
             odometry_now = pose.odometry * (truth.inverse() * moved)
-            result, why = confirm_stored_pose(maps, points, pose, Rigid2D(), odometry_now, 60.0)
+            result, why = confirm_stored_pose(maps, points, pose, Rigid2D(), SinceStored(60.0, odometry_now))
             assert result is not None and 'moved by odometry' in result.message, why
             assert_pose_near(result.pose, moved)
             by_odometry += 1
@@ -99,18 +101,18 @@ def test_a_moved_or_carried_robot_a_stale_file_or_a_new_map_is_not_confirmed(off
     if far is not None:
         cases.append(('carried across the office', office, far.pose))
     for label, where, at in cases:
-        points = scan_to_points(simulate_scan(where, at, rng=rng, **LASER))
-        result, why = confirm_stored_pose(maps, points, pose, Rigid2D(), None, 60.0)
+        points = scan_to_points(simulate_scan(where, at, LASER, rng=rng))
+        result, why = confirm_stored_pose(maps, points, pose, Rigid2D(), SinceStored(60.0))
         assert result is None and 'does not confirm' in why, label
-    points = scan_to_points(simulate_scan(office, truth, rng=rng, **LASER))
-    assert 'stale' in confirm_stored_pose(maps, points, pose, Rigid2D(), None, 7200.0, max_age_s=3600.0)[1]
+    points = scan_to_points(simulate_scan(office, truth, LASER, rng=rng))
+    assert 'stale' in confirm_stored_pose(maps, points, pose, Rigid2D(), SinceStored(7200.0), max_age_s=3600.0)[1]
     # stamped a year in the future (the clock went back): an age that cannot be known is stale
-    future = confirm_stored_pose(maps, points, pose, Rigid2D(), None, -31536000.0, max_age_s=3600.0)
+    future = confirm_stored_pose(maps, points, pose, Rigid2D(), SinceStored(-31536000.0), max_age_s=3600.0)
     assert future[0] is None and 'stamped 31536000 s in the future' in future[1]
     grown = MapSet({**maps.localizers, 'annex': maps.localizers['mirror']})
-    assert 'map annex was not searched then' in confirm_stored_pose(grown, points, pose, Rigid2D(), None, 1.0)[1]
+    assert 'map annex was not searched then' in confirm_stored_pose(grown, points, pose, Rigid2D(), SinceStored(1.0))[1]
     other = StoredPose('floor_9', ('floor_9',), truth, pose.fit, 1.0, (0.0,) * 9, 0.0)
-    assert 'not served' in confirm_stored_pose(maps, points, other, Rigid2D(), None, 1.0)[1]
+    assert 'not served' in confirm_stored_pose(maps, points, other, Rigid2D(), SinceStored(1.0))[1]
 
 
 def test_only_a_confident_answer_is_stored(office_set):

@@ -14,6 +14,7 @@ from global_loc.core.pose_history import PoseHistory
 from global_loc.core.scan import scan_to_points
 from global_loc.core.supervisor import Health, Supervisor, SupervisorConfig
 from global_loc.core.transform import Rigid2D
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import simulate_scan
 
 AUTO = SupervisorConfig(auto_relocalize=True, lost_after_s=3.0, min_interval_s=10.0, max_attempts=2, settle_s=5.0)
@@ -127,9 +128,9 @@ def test_motion_never_picks_one_of_perfect_twins():
     m = symmetric_room()
     truth = Rigid2D(2.0, 1.4, 0.4)
     rng = np.random.default_rng(2)
-    kw = dict(fov_deg=360.0, num_beams=720, range_max=20.0, noise_std=0.01, dropout=0.01)
+    laser = LaserConfig(360.0, 720, range_max=20.0, noise_std=0.01, dropout=0.01)
     localizer = Localizer(m)
-    result = localizer.localize(simulate_scan(m, truth, rng=rng, **kw))
+    result = localizer.localize(simulate_scan(m, truth, laser, rng=rng))
     assert result.outcome == Outcome.AMBIGUOUS
     matcher = localizer.matcher('bnb')
     resolver = MotionResolver([h.pose for h in result.hypotheses])
@@ -137,7 +138,7 @@ def test_motion_never_picks_one_of_perfect_twins():
     for _ in range(60):
         step = Rigid2D(0.0, 0.0, 0.1)
         pose = pose * step
-        points = scan_to_points(simulate_scan(m, pose, rng=rng, **kw))
+        points = scan_to_points(simulate_scan(m, pose, laser, rng=rng))
 
         def fit(base, points=points):
             score, through, refined = matcher.fit_at(points, base)
@@ -153,18 +154,18 @@ def test_scans_of_the_way_fused_into_one_view_settle_what_one_scan_cannot():
     with the odometry, are one place - and in a symmetric room they stay ambiguous."""
     from global_loc.core.motion import fuse_scans
     from global_loc.sim.synthetic_maps import aisles_with_a_box
-    cases = [(aisles_with_a_box(), Rigid2D(4.0, 4.4, math.pi / 2), dict(fov_deg=180.0, num_beams=361, range_max=2.5),
-              Outcome.LOCALIZED),
-             (symmetric_room(), Rigid2D(2.0, 1.4, 0.4), dict(fov_deg=360.0, num_beams=720, range_max=20.0),
-              Outcome.AMBIGUOUS)]
+    cases = [(aisles_with_a_box(), Rigid2D(4.0, 4.4, math.pi / 2),
+              LaserConfig(180.0, 361, range_max=2.5, noise_std=0.005, dropout=0.0), Outcome.LOCALIZED),
+             (symmetric_room(), Rigid2D(2.0, 1.4, 0.4),
+              LaserConfig(360.0, 720, range_max=20.0, noise_std=0.005, dropout=0.0), Outcome.AMBIGUOUS)]
     for m, truth, laser, outcome in cases:
         rng = np.random.default_rng(1)
         localizer = Localizer(m)
         seen, pose = [], truth
         for _ in range(20):
-            seen.append((pose, scan_to_points(simulate_scan(m, pose, rng=rng, noise_std=0.005, **laser))))
+            seen.append((pose, scan_to_points(simulate_scan(m, pose, laser, rng=rng))))
             pose = pose * Rigid2D(0.0, 0.0, 0.3)
-        assert localizer.localize(simulate_scan(m, truth, rng=rng, noise_std=0.005, **laser)).outcome == \
+        assert localizer.localize(simulate_scan(m, truth, laser, rng=rng)).outcome == \
             Outcome.AMBIGUOUS
         fused = localizer.localize_points(fuse_scans(seen), 'bnb')
         assert fused.outcome == outcome, fused.message

@@ -16,6 +16,7 @@ from global_loc.core.map_io import UNKNOWN, make_map
 from global_loc.core.matchers.bnb import BranchAndBoundOptions
 from global_loc.core.outcome import Outcome
 from global_loc.core.transform import Rigid2D, pose_correct
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import simulate_scan
 
 
@@ -45,7 +46,9 @@ POSES = [Rigid2D(1.5, 2.5, 0.4), Rigid2D(3.2, 1.0, -1.2), Rigid2D(0.8, 3.2, 2.6)
 @pytest.mark.parametrize('pose', POSES)
 def test_a_place_whose_nearby_walls_are_unknown_is_never_answered_at_its_twin(pose, radius):
     hall = half_turn_symmetric_hall()
-    scan = simulate_scan(hall, pose, 270, 541, 20.0, noise_std=0.01, rng=np.random.default_rng(1))
+    scan = simulate_scan(hall, pose,
+                         LaserConfig(270, 541, range_max=20.0, noise_std=0.01, dropout=0.0),
+                         rng=np.random.default_rng(1))
     full = Localizer(hall).localize(scan)
     assert not full.success and full.outcome == Outcome.AMBIGUOUS       # the hall itself: the twin ties
     assert any(pose_correct(h.pose, twin_of(pose)) for h in full.hypotheses)
@@ -63,7 +66,8 @@ def test_with_no_credit_for_unknown_cells_the_twin_is_answered_confidently():
     """What the rule prevents: unknown counted against the true place (unknown_credit 0),
     the corner pose's fully mapped twin wins with a confident answer."""
     hall, pose = half_turn_symmetric_hall(), POSES[2]
-    scan = simulate_scan(hall, pose, 270, 541, 20.0, noise_std=0.01, rng=np.random.default_rng(1))
+    scan = simulate_scan(hall, pose, LaserConfig(270, 541, range_max=20.0, noise_std=0.01, dropout=0.0),
+                         rng=np.random.default_rng(1))
     result = Localizer(unmapped_around(hall, pose, 1.0), UNCREDITED).localize(scan)
     assert result.success and pose_correct(result.pose, twin_of(pose)), result.message
 
@@ -83,7 +87,8 @@ def test_where_the_map_knows_every_cell_the_scan_reaches_the_answer_is_unchanged
         col, row = office_map.frame.cell_of(np.array([[pose.x, pose.y]]))[0]
         if not (0 <= row < office_map.height and 0 <= col < office_map.width) or not office_map.free[row, col]:
             continue
-        scan = simulate_scan(office_map, pose, 270, 541, 20.0, noise_std=0.01, rng=rng)
+        scan = simulate_scan(office_map, pose,
+                             LaserConfig(270, 541, range_max=20.0, noise_std=0.01, dropout=0.0), rng=rng)
         a, b = Localizer(office_map).localize(scan), Localizer(patched).localize(scan)
         if not a.success:
             continue

@@ -15,6 +15,7 @@ from global_loc.core.pose_history import PoseHistory
 from global_loc.core.scan import scan_to_points, voxel_filter
 from global_loc.core.transform import Rigid2D
 from global_loc.core.view import SensorReading, ViewConfig, ViewError, merge_view, reading_from_scan
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import simulate_scan
 
 FRONT = Mount3D(0.16, 0.0, 0.30)
@@ -30,7 +31,8 @@ def office_localizer(office_map):
 
 
 def laser_reading(occupancy_map, truth, mount, name='scan', fov=270.0, beams=541, seed=0, stamp=0.0):
-    scan = simulate_scan(occupancy_map, truth * mount.upright(), fov, beams, 8.0, noise_std=0.01,
+    scan = simulate_scan(occupancy_map, truth * mount.upright(),
+                         LaserConfig(fov, beams, range_max=8.0, noise_std=0.01, dropout=0.0),
                          rng=np.random.default_rng(seed))
     scan.stamp = stamp
     return reading_from_scan(name, scan, mount)
@@ -57,8 +59,9 @@ def test_mount3d_puts_sensor_points_on_the_base_any_way_up():
 def test_one_level_laser_stays_its_own_scan_and_localizes_as_before(office_map, office_localizer):
     truth = Rigid2D(3.0, 4.0, 0.7)
     mount = Mount3D.planar(Rigid2D(0.16, 0.0, 0.0), z=0.3)
-    scan = simulate_scan(office_map, truth * mount.upright(), 270.0, 541, 20.0, noise_std=0.01,
-                         dropout=0.05, rng=np.random.default_rng(1))
+    scan = simulate_scan(office_map, truth * mount.upright(),
+                         LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.05),
+                         rng=np.random.default_rng(1))
     alone = scan_to_points(scan)
     view = merge_view({'scan': reading_from_scan('scan', scan, mount)}, config=ViewConfig(voxel_size=0.05))
     assert view.points.beams and view.base_T_laser == mount.upright()
@@ -73,7 +76,8 @@ def test_one_level_laser_stays_its_own_scan_and_localizes_as_before(office_map, 
 def test_an_upside_down_laser_localizes_by_its_mounting(office_map, office_localizer):
     truth = Rigid2D(3.0, 4.0, 0.7)
     mount = Mount3D(0.16, 0.0, 0.3, math.pi, 0.0, 0.0)
-    upright = simulate_scan(office_map, truth * mount.upright(), 270.0, 541, 20.0)
+    upright = simulate_scan(office_map, truth * mount.upright(),
+                            LaserConfig(270.0, 541, range_max=20.0, noise_std=0.0, dropout=0.0))
     upright.ranges = upright.ranges[::-1].copy()       # the same beams, read clockwise
     view = merge_view({'scan': reading_from_scan('scan', upright, mount)})
     result = office_localizer.localize_points(view.points, 'bnb', base_T_laser=view.base_T_laser)

@@ -45,7 +45,7 @@ from .suites import (
     symmetric_maps,
 )
 from .tables import read_rows, write_rows
-from .tail import tail_rows
+from .tail import TailSample, tail_rows
 from .unmapped import unmapped_trials
 from .worker import run_job, worker_init
 
@@ -201,8 +201,8 @@ def run_other_suites(run: Run, notes: dict) -> None:
         notes['map_set'] = maps_rows(maps, max(2, poses // 5) if args.quick else max(4, poses // 2), args.seed)
     if 'tail' in suites:
         print('tail suite (one localization at a time: changed world, logs, tiled building) ...', file=sys.stderr)
-        notes['tail'] = tail_rows(maps, args.shared, tiled_building(maps, args.shared), max(4, poses // 2),
-                                  args.scans_per_log or (12 if args.quick else 50), args.seed, os.cpu_count() or 1)
+        sample = TailSample(max(4, poses // 2), args.scans_per_log or (12 if args.quick else 50), args.seed)
+        notes['tail'] = tail_rows(maps, args.shared, tiled_building(maps, args.shared), sample, os.cpu_count() or 1)
     if 'follow' in suites:
         print('follow suite (resolution by motion on the CARMEN logs) ...', file=sys.stderr)
         notes['follow'] = follow_rows(args.shared, args.scans_per_log or (12 if args.quick else 100), args.seed)

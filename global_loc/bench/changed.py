@@ -11,13 +11,14 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from ..core.map_io import OccupancyMap  # noqa: E402
 from ..sim.changes import LEVELS, changed_world  # noqa: E402
+from ..sim.laser import LaserConfig  # noqa: E402
 from ..sim.raycast import sample_free_poses, simulate_scan  # noqa: E402
 from .suites import Trial  # noqa: E402
 from .tables import group, pct, save_figure, secs, stats  # noqa: E402
 
 CHANGE_LEVELS = (0, *sorted(LEVELS))
 # 270 deg / 20 m, 0.5 deg beams, 1 cm noise, 1% dropouts (the sim suite's laser)
-LASER = {'fov_deg': 270.0, 'num_beams': 541, 'range_max': 20.0, 'noise_std': 0.01, 'dropout': 0.01}
+LASER = LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.01)
 
 
 def changed_trials(maps: dict[str, OccupancyMap], poses_per_map: int, seed: int) -> list[Trial]:
@@ -29,7 +30,7 @@ def changed_trials(maps: dict[str, OccupancyMap], poses_per_map: int, seed: int)
             for level in CHANGE_LEVELS:
                 world = changed_world(m, level, pose, rng) if level else m
                 trials.append(Trial('changed', name, {'change': level, 'angle_step': 5}, pose,
-                                    scan=simulate_scan(world, pose, rng=rng, **LASER)))
+                                    scan=simulate_scan(world, pose, LASER, rng=rng)))
     return trials
 
 

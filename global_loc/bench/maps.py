@@ -17,7 +17,7 @@ from ..core.localizer import Localizer
 from ..core.map_io import OccupancyMap
 from ..core.map_set import MapSet
 from ..core.scan import scan_to_points
-from ..core.stored_pose import confirm_stored_pose, stored_from_result
+from ..core.stored_pose import SinceStored, confirm_stored_pose, stored_from_result
 from ..core.transform import Rigid2D, pose_correct
 from ..sim.raycast import sample_free_poses, simulate_scan
 from .tables import group, pct, secs
@@ -38,7 +38,7 @@ def maps_rows(maps: dict[str, OccupancyMap], poses_per_map: int, seed: int) -> l
         rng = np.random.default_rng(seed + 700 + i)
         twins = MapSet({TWINS[0]: loc, TWINS[1]: loc})
         for pose in sample_free_poses(loc.map, poses_per_map, rng, clearance=0.5):
-            scan = simulate_scan(loc.map, pose, rng=rng, **LASER)
+            scan = simulate_scan(loc.map, pose, LASER, rng=rng)
             t0 = time.perf_counter()
             alone = loc.localize(scan)
             own_s = time.perf_counter() - t0
@@ -86,9 +86,9 @@ def start_up_rows(every: MapSet, result, name: str, pose: Rigid2D, rng) -> list[
             break
     rows = []
     for case, (on, truth) in cases.items():
-        points = scan_to_points(simulate_scan(every.localizers[on].map, truth, rng=rng, **LASER))
+        points = scan_to_points(simulate_scan(every.localizers[on].map, truth, LASER, rng=rng))
         t0 = time.perf_counter()
-        confirmed, _ = confirm_stored_pose(every, points, stored, Rigid2D(), None, 0.0)
+        confirmed, _ = confirm_stored_pose(every, points, stored, Rigid2D(), SinceStored(0.0))
         answer = confirmed or every.localize_points(points)
         start_s = time.perf_counter() - t0
         full = every.localize_points(points)

@@ -12,7 +12,7 @@ import numpy as np  # noqa: E402
 
 from ..core.scan import scan_to_points  # noqa: E402
 from ..core.transform import Rigid2D  # noqa: E402
-from ..offline.plot import plot_localization  # noqa: E402
+from ..offline.plot import DrawnPoses, plot_localization  # noqa: E402
 from .calibration import calibration_section  # noqa: E402
 from .changed import changed_section  # noqa: E402
 from .follow import follow_section  # noqa: E402
@@ -302,8 +302,8 @@ def failure_pictures(rows, trials, maps, out, count=2) -> list[str]:
         if trials is not None:        # else: the pictures already drawn for these rows
             t = trials[r['trial']]
             plot_localization(os.path.join(out, f'failure_{i + 1}.png'), maps[t.map_name],
-                              scan_to_points(t.scan).points, Rigid2D(*r['estimate']), t.truth,
-                              base_T_laser=t.base_T_laser,
+                              scan_to_points(t.scan).points, DrawnPoses(Rigid2D(*r['estimate']), t.truth),
+                              t.base_T_laser,
                               title=f'{r["suite"]} / {r["map"]}: {BASELINE} {r["err_xy"]:.1f} m, '
                                     f'{r["err_yaw_deg"]:.0f}° off, score {r["score"]:.2f}, success={r["success"]}')
         md += [f'![failure {i + 1}](failure_{i + 1}.png)', '',

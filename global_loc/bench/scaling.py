@@ -21,6 +21,7 @@ import numpy as np
 from ..core.localizer import Localizer
 from ..core.map_io import OccupancyMap, make_map
 from ..core.transform import Rigid2D, pose_correct
+from ..sim.laser import LaserConfig
 from ..sim.raycast import sample_free_poses, simulate_scan
 
 SIZES = (500, 1000, 2000, 4000, 6000)
@@ -84,7 +85,8 @@ def scaling_rows(building: OccupancyMap, real_maps: dict[str, OccupancyMap], pos
                      'free_m2': round(free_area_m2(m)), **precompute_cost(m)})
         rng = np.random.default_rng(seed + 1000 + i)
         truths = sample_free_poses(m, poses, rng, clearance=0.5)
-        scans = [simulate_scan(m, t, 270.0, 541, 20.0, noise_std=0.01, dropout=0.01, rng=rng) for t in truths]
+        laser = LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.01)
+        scans = [simulate_scan(m, t, laser, rng=rng) for t in truths]
         loc = Localizer(m)
         for method in [k for k in methods if k not in too_slow]:
             for truth, scan in zip(truths, scans, strict=True):

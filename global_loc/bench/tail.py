@@ -6,6 +6,7 @@ The report is a table of the targets, met or not, with what the rows say of the 
 from __future__ import annotations
 
 import multiprocessing as mp
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -15,6 +16,7 @@ from ..core.localizer import Localizer
 from ..core.map_io import OccupancyMap
 from ..core.matchers.bnb import BranchAndBoundOptions
 from ..core.transform import pose_correct
+from ..sim.laser import LaserConfig
 from ..sim.raycast import sample_free_poses, simulate_scan
 from . import worker
 from .changed import CHANGE_LEVELS, changed_trials
@@ -31,14 +33,25 @@ MAX_NODES = BranchAndBoundOptions().max_nodes      # the rows are bnb at its def
 LIMITS = {'changed_p95_s': 1.0, 'logs_median_s': 0.1, 'logs_p95_s': 0.5, 'big_p95_s': 1.5, 'peak_mb': 800.0}
 
 
-def tail_rows(maps: dict[str, OccupancyMap], shared: str, building: OccupancyMap, poses: int, scans_per_log: int,
-              seed: int, threads: int, sizes=BIG_SIZES) -> list[dict]:
+@dataclass(frozen=True)
+class TailSample:
+    """What the tail suite draws: `poses` per map of the changed world (at its heaviest level;
+    half as many, at least 3, on each tiled size), `scans_per_log` of each real log, all
+    seeded by `seed`."""
+    poses: int
+    scans_per_log: int
+    seed: int
+
+
+def tail_rows(maps: dict[str, OccupancyMap], shared: str, building: OccupancyMap, sample: TailSample,
+              threads: int, sizes=BIG_SIZES) -> list[dict]:
     """Rows of kind 'changed', 'carmen' (run_job's) and 'big' (one per localization, with
-    its process's peak memory). (8 arguments: the run's maps, data folder and building, its
-    sizes of sample, seed and threads, and the tiled sizes.)"""
+    its process's peak memory): the run's maps and data folder, the building tiled to each
+    of `sizes`, localized on `threads` threads."""
+    poses, seed = sample.poses, sample.seed
     world = {n: m for n, m in maps.items() if '/' not in n}
     trials = [t for t in changed_trials(world, poses, seed) if t.condition['change'] == CHANGE_LEVELS[-1]]
-    carmen, carmen_maps, _ = carmen_trials(shared, scans_per_log, seed)
+    carmen, carmen_maps, _ = carmen_trials(shared, sample.scans_per_log, seed)
     worker.worker_init({**world, **carmen_maps}, threads)
     rows = []
     for i, trial in enumerate(tqdm(trials + carmen, desc='tail: changed world and logs', unit='scan')):
@@ -58,7 +71,8 @@ def big_map_rows(building: OccupancyMap, size: int, count: int, seed: int, threa
     rng = np.random.default_rng(seed + 1000)
     # the scans drawn first: the peak is then what a server holding this map reaches
     truths = sample_free_poses(m, count, rng, clearance=0.5)
-    scans = [simulate_scan(m, truth, 270.0, 541, 20.0, noise_std=0.01, dropout=0.01, rng=rng) for truth in truths]
+    laser = LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.01)
+    scans = [simulate_scan(m, truth, laser, rng=rng) for truth in truths]
     loc = Localizer(m)
     loc.matcher('bnb')
     rows = []

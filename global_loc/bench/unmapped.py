@@ -13,6 +13,7 @@ import numpy as np
 
 from ..core.map_io import UNKNOWN, OccupancyMap, make_map
 from ..core.transform import Rigid2D
+from ..sim.laser import LaserConfig
 from ..sim.raycast import sample_free_poses, simulate_scan
 from .suites import Trial
 from .tables import group, pct, secs, stats
@@ -22,7 +23,7 @@ FREE_RADIUS_M = 2.0        # walls made free within this radius
 ROOM_M = 3.0               # the unknown room: a square this wide, its near edge ROOM_GAP_M from the robot
 ROOM_GAP_M = 0.5
 # 270 deg / 20 m, 0.5 deg beams, 1 cm noise, 1% dropouts (the sim suite's laser)
-LASER = {'fov_deg': 270.0, 'num_beams': 541, 'range_max': 20.0, 'noise_std': 0.01, 'dropout': 0.01}
+LASER = LaserConfig(270.0, 541, range_max=20.0, noise_std=0.01, dropout=0.01)
 
 
 def unmapped_around(occupancy_map: OccupancyMap, pose: Rigid2D, radius_m: float) -> OccupancyMap:
@@ -73,7 +74,7 @@ def unmapped_trials(maps: dict[str, OccupancyMap], poses_per_map: int, seed: int
     for i, (name, m) in enumerate(maps.items()):
         rng = np.random.default_rng(seed + 500 + i)
         for pose in sample_free_poses(m, poses_per_map, rng, clearance=0.5):
-            scan = simulate_scan(m, pose, rng=rng, **LASER)
+            scan = simulate_scan(m, pose, LASER, rng=rng)
             cuts = [('walls unknown', radius, unmapped_around(m, pose, radius)) for radius in RADII_M] + \
                 [('walls free', FREE_RADIUS_M, freed_around(m, pose, FREE_RADIUS_M)),
                  ('room unknown', ROOM_M, unknown_room_beside(m, pose))]

@@ -57,6 +57,21 @@ class LocalizerConfig:
     mirror_check: bool = True
 
 
+@dataclass(frozen=True)
+class SearchLimits:
+    """What bounds one search beyond the configuration: where (`region`, of the robot base:
+    every answer lies in it), from when its time limit (max_search_s) counts (`t0`, a
+    time.perf_counter(); None: the call), and for bnb the band and the work: `incumbent`, a
+    score a place elsewhere is known to reach (another map of a set: only the band below it
+    is searched, so a map without a rival is ruled out quickly), and `max_nodes`, the node
+    budget (0: its option's). A map set's goal gives each map's search its own start, so
+    that one limit holds for the goal, not one per map."""
+    region: Optional[SearchRegion] = None
+    t0: Optional[float] = None
+    incumbent: float = 0.0
+    max_nodes: int = 0
+
+
 # How far, in the search's resolution (a cell, a leaf heading step), a refinement may move a
 # candidate out of the prior as searched and still be moved onto the prior (Localizer.kept):
 # the refinement starts at a leaf inside it and wanders a few (0.47 deg, 2.3 steps, measured).
@@ -222,7 +237,7 @@ class Localizer:
     def probe(self, points: ScanPoints, max_nodes: int, incumbent: float = 0.0, base_T_laser: Optional[Rigid2D] = None,
               region: Optional[SearchRegion] = None) -> tuple[float, bool]:
         """bnb's tree search alone, within `max_nodes` expansions and below `incumbent` (see
-        localize_points), with no refinement and no verdict: (its best leaf score, whether it
+        SearchLimits), with no refinement and no verdict: (its best leaf score, whether it
         ended within the budget). How well this map can explain the scan, cheaply - a map
         set's rounds (core.map_set); (0, True) for a map with no obstacles."""
         if not self._has_obstacles:
@@ -242,8 +257,8 @@ class Localizer:
         it; otherwise returns a result, successful or not. `base_T_laser` overrides the
         config's laser mounting; `region` (of the robot base) restricts the search."""
         t0 = time.perf_counter()
-        return self.localize_points(scan_to_points(scan), method, angle_step_deg, progress, base_T_laser, t0,
-                                    region)
+        return self.localize_points(scan_to_points(scan), method, angle_step_deg, progress, base_T_laser,
+                                    SearchLimits(region, t0))
 
     def judged(self, matcher, points: ScanPoints, options: MatchOptions, progress: Optional[ProgressFn], t0: float,
                keep: tuple) -> tuple:
@@ -278,25 +293,20 @@ class Localizer:
 
     def localize_points(self, points: ScanPoints, method: Optional[str] = None,
                         angle_step_deg: Optional[float] = None, progress: Optional[ProgressFn] = None,
-                        base_T_laser: Optional[Rigid2D] = None, t0: Optional[float] = None,
-                        region: Optional[SearchRegion] = None, incumbent: float = 0.0,
-                        max_nodes: int = 0) -> LocalizationResult:
-        """`localize` for points already in the laser frame (e.g. a local map cut from the map).
-        `incumbent`: a score a place elsewhere is known to reach (another map of a set): bnb
-        searches only the band below it, so a map without a rival is ruled out quickly;
-        `max_nodes`: bnb's node budget for this search (0: its option's); `t0`: when the
-        time limit (max_search_s) started - a map set's goal passes its own start, so that one
-        limit holds for the goal, not one per map. (9 arguments: the
-        points and `localize`'s options, each optional, named by the caller.)"""
+                        base_T_laser: Optional[Rigid2D] = None,
+                        limits: SearchLimits = SearchLimits()) -> LocalizationResult:
+        """`localize` for points already in the laser frame (e.g. a local map cut from the map),
+        within `limits` (the prior, the time limit's start, bnb's incumbent and node budget)."""
         cfg = self.config
-        t0 = time.perf_counter() if t0 is None else t0
+        t0 = time.perf_counter() if limits.t0 is None else limits.t0
         matcher = self.matcher(method or cfg.method)
         base_T_laser = base_T_laser or cfg.base_T_laser
+        region = limits.region
         prior = region if region is not None and region.bounded else None    # every answer lies in it
         options, searched, near, widened = self.search_options(matcher, points, angle_step_deg, base_T_laser, prior)
         laser_T_base = base_T_laser.inverse()
         # the time limit counts from t0 (a map set's goal: from its start, shared by every map)
-        options = dataclasses.replace(options, incumbent=incumbent, max_nodes=max_nodes,
+        options = dataclasses.replace(options, incumbent=limits.incumbent, max_nodes=limits.max_nodes,
                                       spent_s=time.perf_counter() - t0)
         if not self._has_obstacles:
             return LocalizationResult(Outcome.NO_MATCH, f'the map {self.map.source} has no obstacles (no occupied '

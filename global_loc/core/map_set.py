@@ -19,13 +19,14 @@ import dataclasses
 import math
 import os
 import time
+from dataclasses import dataclass
 from typing import Optional, Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from .files import UnreadableFile, brief, read_yaml_file
-from .localizer import LocalizationResult, Localizer
+from .localizer import LocalizationResult, Localizer, SearchLimits
 from .matchers import TRACKER_METHOD, resolve_method
 from .matchers.base import ProgressFn
 from .outcome import Outcome
@@ -38,6 +39,14 @@ PROBE_NODES = (300, 2_000)    # the probe rounds' node budgets (bnb expansions) 
 
 class MapSetError(ValueError):
     """A map set that cannot be served as asked: no maps, two maps of one name, an unknown name."""
+
+
+@dataclass(frozen=True)
+class MapSetPrior:
+    """Where a map set's search looks: on `maps` (by name; empty: every map of the set) and,
+    on each of them, within `region` (of the robot base; None: anywhere)."""
+    maps: Sequence[str] = ()
+    region: Optional[SearchRegion] = None
 
 
 def map_name(yaml_path: str) -> str:
@@ -163,23 +172,19 @@ class MapSet:
 
     def localize(self, scan: Scan, method: Optional[str] = None, angle_step_deg: Optional[float] = None,
                  progress: Optional[ProgressFn] = None, base_T_laser: Optional[Rigid2D] = None,
-                 region: Optional[SearchRegion] = None, maps: Optional[Sequence[str]] = None) -> LocalizationResult:
-        """Localizer.localize over the maps asked (`region`: a prior in each of them). The
-        result's `map` and each hypothesis's `map` name the map (7 arguments: localize's and
-        the maps)."""
-        return self.localize_points(scan_to_points(scan), method, angle_step_deg, progress, base_T_laser,
-                                    region, maps)
+                 prior: MapSetPrior = MapSetPrior()) -> LocalizationResult:
+        """Localizer.localize over the maps `prior` names, within its region on each. The
+        result's `map` and each hypothesis's `map` name the map."""
+        return self.localize_points(scan_to_points(scan), method, angle_step_deg, progress, base_T_laser, prior)
 
     def localize_points(self, points, method: Optional[str] = None, angle_step_deg: Optional[float] = None,
                         progress: Optional[ProgressFn] = None, base_T_laser: Optional[Rigid2D] = None,
-                        region: Optional[SearchRegion] = None,
-                        maps: Optional[Sequence[str]] = None) -> LocalizationResult:
-        """`localize` for points already in the laser frame (7 arguments: as `localize`).
-        With several maps and bnb, the maps are probed first (raced_leaves), then each is
-        searched in full, the one with the best leaf first, every search seeded with the
-        best leaf found anywhere so far."""
+                        prior: MapSetPrior = MapSetPrior()) -> LocalizationResult:
+        """`localize` for points already in the laser frame. With several maps and bnb, the
+        maps are probed first (raced_leaves), then each is searched in full, the one with the
+        best leaf first, every search seeded with the best leaf found anywhere so far."""
         t0 = time.perf_counter()
-        names = self.searched(maps)
+        names, region = self.searched(prior.maps), prior.region
         raced = len(names) > 1 and resolve_method(method or self.localizers[names[0]].config.method) == TRACKER_METHOD
         leaf = self.raced_leaves(points, names, base_T_laser, region) if raced else {n: 0.0 for n in names}
         best_leaf = max(leaf.values())
@@ -189,7 +194,7 @@ class MapSet:
             part = None if progress is None else (
                 lambda fraction, score, k=k: progress((k + fraction) / len(names), score))
             results[name] = tagged(self.localizers[name].localize_points(
-                points, method, angle_step_deg, part, base_T_laser, t0=t0, region=region, incumbent=best_leaf), name)
+                points, method, angle_step_deg, part, base_T_laser, SearchLimits(region, t0, best_leaf)), name)
             best_leaf = max(best_leaf, leaf_of(results[name]))
         return across({n: results[n] for n in names}, {n: self.localizers[n].tracker(method) for n in names},
                       time.perf_counter() - t0, self.common_fits(points, results, base_T_laser))

@@ -18,7 +18,7 @@ import numpy as np
 from .limits import MAX_LASER_TILT_DEG
 from .mount3d import Mount3D, Mount3DError
 from .scan import Scan, ScanError
-from .transform import Rigid2D
+from .transform import Quaternion, Rigid2D
 
 
 class MountError(ScanError):
@@ -54,10 +54,10 @@ class LaserMount:
         return LaserMount.from_rotation(mount.x, mount.y, mount.rotation())
 
     @staticmethod
-    def from_quaternion(x: float, y: float, qx: float, qy: float, qz: float, qw: float) -> 'LaserMount':
-        """From a tf transform's translation (x, y) and rotation quaternion."""
+    def from_quaternion(x: float, y: float, rotation: Quaternion) -> 'LaserMount':
+        """From a tf transform's translation (x, y) and rotation (as Mount3D.from_quaternion)."""
         try:
-            mount = Mount3D.from_quaternion(x, y, 0.0, qx, qy, qz, qw)
+            mount = Mount3D.from_quaternion(x, y, 0.0, rotation)
         except Mount3DError as e:
             raise MountError(f'laser mounting: {e}') from None
         return LaserMount.from_mount3d(mount)

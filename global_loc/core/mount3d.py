@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .transform import Rigid2D, rotation_of_quaternion
+from .transform import Quaternion, Rigid2D, rotation_of_quaternion
 
 # A scan plane whose normal is within this of vertical is level: its beams, projected to
 # the floor, are beams from one origin with their true lengths (the free-space check holds).
@@ -48,15 +48,16 @@ class Mount3D:
         return Mount3D(*values)
 
     @staticmethod
-    def from_quaternion(x: float, y: float, z: float, qx: float, qy: float, qz: float, qw: float) -> 'Mount3D':
-        """From a tf transform's translation and rotation quaternion (normalized here). (7
-        arguments: a geometry_msgs/Transform's seven numbers, as tf and a params file give them.)"""
+    def from_quaternion(x: float, y: float, z: float, rotation: Quaternion) -> 'Mount3D':
+        """From a tf transform's translation and rotation (a quaternion with fields x, y, z, w:
+        core.transform.Quaternion or a geometry_msgs/Quaternion; normalized here)."""
+        q = [rotation.x, rotation.y, rotation.z, rotation.w]
         try:
-            rotation = rotation_of_quaternion(qx, qy, qz, qw)
+            matrix = rotation_of_quaternion(*q)
         except ValueError:
-            raise Mount3DError(f'a mounting quaternion must be finite and non-zero, got {[qx, qy, qz, qw]}') from None
+            raise Mount3DError(f'a mounting quaternion must be finite and non-zero, got {q}') from None
         m = np.eye(4)
-        m[:3, :3], m[:3, 3] = rotation, (x, y, z)
+        m[:3, :3], m[:3, 3] = matrix, (x, y, z)
         return Mount3D.from_matrix(m)
 
     @staticmethod

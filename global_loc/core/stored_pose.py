@@ -81,6 +81,15 @@ class StoredPose:
         return stored
 
 
+@dataclass(frozen=True)
+class SinceStored:
+    """What the start-up knows of the time since the pose was stored: how long ago that was
+    (`age_s`, from the file's stamp), and the odometry at the scan now (`odometry`; None:
+    not known), which the stored odometry is compared with."""
+    age_s: float
+    odometry: Optional[Rigid2D] = None
+
+
 def stored_from_result(result: LocalizationResult, maps, stamp: float,
                        odometry: Optional[Rigid2D] = None) -> StoredPose:
     """What to keep of a confident answer (`maps`: the set it was searched in)."""
@@ -129,13 +138,12 @@ def load_stored_pose(path: str) -> StoredPose:
 
 
 def confirm_stored_pose(map_set, points: ScanPoints, stored: StoredPose, base_T_laser: Rigid2D,
-                        odometry_now: Optional[Rigid2D], age_s: float,
-                        max_age_s: float = 0.0) -> tuple[Optional[LocalizationResult], str]:
+                        since: SinceStored, max_age_s: float = 0.0) -> tuple[Optional[LocalizationResult], str]:
     """(the confirmed answer, '') or (None, why it is not confirmed). `map_set`: the maps
-    served now (core.map_set.MapSet); `odometry_now`: the odometry at the scan, if known;
-    `age_s`: how long ago the pose was stored; `max_age_s`: older is stale (0: any age).
-    (7 arguments: the scan, the stored pose and the three facts the start-up has about now.)"""
+    served now (core.map_set.MapSet); `since`: the pose's age and the odometry now;
+    `max_age_s`: older is stale (0: any age)."""
     t0 = time.perf_counter()
+    age_s, odometry_now = since.age_s, since.odometry
     if not math.isfinite(age_s) or age_s < 0:
         # stamped in the future (the clock went back, or the file came from another machine):
         # an age that cannot be known is stale, whatever the limit

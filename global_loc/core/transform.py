@@ -11,8 +11,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
+
+
+class Quaternion(NamedTuple):
+    """A rotation quaternion by geometry_msgs/Quaternion's fields (x, y, z, w): wherever one
+    is taken, such a message of rclpy or rosbags is taken alike."""
+    x: float
+    y: float
+    z: float
+    w: float
 
 
 def yaw_of_quaternion(q) -> float:

@@ -27,6 +27,7 @@ from ..core.paths import default_map_yaml
 from ..core.scan import Scan, ScanError, scan_to_points
 from ..core.transform import Rigid2D, pose_error
 from ..core.view import ViewConfig
+from ..sim.laser import LaserConfig
 from ..sim.raycast import sample_free_poses, simulate_scan
 
 
@@ -198,9 +199,10 @@ def localize_scans(args, localizer, scans, fields: dict) -> int:
         if args.plot:
             stem, ext = os.path.splitext(args.plot)
             path = args.plot if n == 1 else f'{stem}_{n:03d}{ext or ".png"}'
-            from .plot import plot_localization
-            plot_localization(path, localizer.map, scan_to_points(scan).points, result.pose, truth,
-                              result.hypotheses, title=f'{fields["method"]}: {result.message}')
+            from .plot import DrawnPoses, plot_localization
+            plot_localization(path, localizer.map, scan_to_points(scan).points,
+                              DrawnPoses(result.pose, truth, result.hypotheses),
+                              title=f'{fields["method"]}: {result.message}')
     return 0
 
 
@@ -209,9 +211,9 @@ def simulate_main(args) -> int:
     occupancy_map = load_map_yaml(args.map)
     rng = np.random.default_rng(args.seed)
     beams = args.beams or int(round(args.fov / 0.5)) + (0 if args.fov >= 360 else 1)
+    laser = LaserConfig(args.fov, beams, range_max=args.range, noise_std=args.noise, dropout=args.dropout)
     for pose in sample_free_poses(occupancy_map, args.count, rng):
-        scan = simulate_scan(occupancy_map, pose, args.fov, beams, args.range, noise_std=args.noise,
-                             dropout=args.dropout, rng=rng)
+        scan = simulate_scan(occupancy_map, pose, laser, rng=rng)
         print(json.dumps({**scan.to_dict(), 'truth': pose.as_dict()}))
     return 0
 

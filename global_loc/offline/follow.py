@@ -124,10 +124,9 @@ def result_fields(result: LocalizationResult, truth: Optional[Rigid2D]) -> dict:
 
 
 def follow_start(localizer, frames: list[Frame], start: int, bounds: FollowBounds, base_T_laser: Rigid2D,
-                 method: Optional[str] = None, end: Optional[int] = None) -> dict:
-    """One start scan localized and, when ambiguous, followed: its output line as a dict.
-    (7 arguments: the recording, the start, its bounds and mounting, and the command line's
-    optional method and last frame.)"""
+                 method: Optional[str] = None) -> dict:
+    """One start scan localized and, when ambiguous, followed over the rest of the recording
+    within `bounds`: its output line as a dict."""
     t0 = time.perf_counter()
     frame = frames[start]
     out = {'index': frame.index, 'stamp': round(frame.scan.stamp, 9)}
@@ -143,7 +142,7 @@ def follow_start(localizer, frames: list[Frame], start: int, bounds: FollowBound
     if followed:
         follower = HypothesisFollower(single, localizer, base_T_laser, frame.odometry, frame.scan.stamp)
         ended = []
-        settled_early = follower.follow(observations(frames, start, bounds, end, ended))
+        settled_early = follower.follow(observations(frames, start, bounds, ended=ended))
         outcome = follower.finish()
         final, settled = outcome.result, outcome.settled
         at = frame if outcome.last is None else outcome.last.source

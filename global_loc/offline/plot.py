@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import math
-from typing import Optional
+from dataclasses import dataclass
+from typing import Optional, Sequence
 
 import matplotlib
 
@@ -15,11 +16,21 @@ from ..core.map_io import OccupancyMap  # noqa: E402
 from ..core.transform import Rigid2D  # noqa: E402
 
 
-def plot_localization(path: str, occupancy_map: OccupancyMap, points_laser: np.ndarray,
-                      estimate: Optional[Rigid2D], truth: Optional[Rigid2D] = None,
-                      hypotheses=(), base_T_laser: Optional[Rigid2D] = None, title: str = '') -> None:
-    """`points_laser`: (N, 2) scan points in the laser frame. Poses are of the robot base.
-    (8 arguments: the file, the map and the scan, then what to draw, each optional.)"""
+@dataclass(frozen=True)
+class DrawnPoses:
+    """The poses a picture shows, of the robot base in the map frame: the estimate (the scan
+    is drawn there; None: no scan), the truth when known, and the hypotheses best first (the
+    first is the estimate's; the others are drawn)."""
+    estimate: Optional[Rigid2D]
+    truth: Optional[Rigid2D] = None
+    hypotheses: Sequence = ()
+
+
+def plot_localization(path: str, occupancy_map: OccupancyMap, points_laser: np.ndarray, poses: DrawnPoses,
+                      base_T_laser: Optional[Rigid2D] = None, title: str = '') -> None:
+    """`points_laser`: (N, 2) scan points in the laser frame, `base_T_laser` that frame on
+    the base (default: the base itself)."""
+    estimate, truth, hypotheses = poses.estimate, poses.truth, poses.hypotheses
     occ = occupancy_map.occupancy
     shade = np.where(occ < 0, 0.8, 1.0 - np.clip(occ, 0, 100) / 100.0)
     h, w = occ.shape

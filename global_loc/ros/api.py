@@ -6,7 +6,7 @@ script (or a test) asks where the robot is with one call and gets a typed answer
     localizer = GlobalLocalizer()
     if not localizer.wait_until_active(30.0):
         raise SystemExit('no active global_loc server')
-    result = localizer.localize(resolve_by_motion_s=20.0, rotate_in_place=True)
+    result = localizer.localize(LocalizeGoal(resolve_by_motion_s=20.0, rotate_in_place=True))
     if result.success:
         print(result.pose, result.confidence)
 
@@ -21,15 +21,13 @@ from __future__ import annotations
 
 import contextlib
 import math
-import numbers as numbers_abc
 import signal
 import threading
 import time
+from dataclasses import dataclass
 from typing import Callable, Optional
 
-import numpy as np
 from action_msgs.srv import CancelGoal
-from geometry_msgs.msg import Pose2D
 from lifecycle_msgs.srv import GetState
 from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
@@ -39,8 +37,8 @@ from std_srvs.srv import Trigger
 
 from global_loc_interfaces.action import Localize
 
-from ..core.transform import Rigid2D
 from .cancel_signals import signals_routed_to
+from .localize_goal import LocalizeGoal  # noqa: F401  (the API's too)
 from .localize_result import (  # noqa: F401  (the errors are the API's too)
     STATUS_NAMES,
     GlobalLocError,
@@ -57,22 +55,30 @@ CANCEL_WAIT_S = 2.0    # an interrupted goal: how long to wait for the server to
 GOAL_ANSWER_S = 2.0    # a spinning server answers a goal request in milliseconds: after this, was it lost?
 
 
+@dataclass(frozen=True)
+class ServerNames:
+    """Which global_loc server a GlobalLocalizer talks to: its node (whose ~/get_state,
+    ~/trigger and ~/status it uses) and its Localize action."""
+    node: str = 'global_loc_server'
+    action: str = 'localize'
+
+
 class GlobalLocalizer(Node):
-    """A client node of one global_loc server (`server_node`, its action `action`).
-    `server_timeout_s` bounds every wait for the server to appear or to accept a request
-    (`__init__`'s 7 arguments: a Node's, and the server's names, waits and signals)."""
+    """A client node of one global_loc server (`server`). `server_timeout_s` bounds every
+    wait for the server to appear or to accept a request; `cancel_signals` cancel a running
+    goal (localize)."""
 
     def __init__(self, node_name: str = 'global_localizer', namespace: str = '', *,
-                 server_node: str = 'global_loc_server', action: str = 'localize', server_timeout_s: float = 10.0,
+                 server: ServerNames = ServerNames(), server_timeout_s: float = 10.0,
                  cancel_signals: tuple = (signal.SIGINT,), context=None):
         super().__init__(node_name, namespace=namespace, context=context)
-        self.server_node, self.action_name = server_node, action
+        self.server_node, self.action_name = server.node, server.action
         self.server_timeout_s, self.cancel_signals = server_timeout_s, cancel_signals
-        self._action = ActionClient(self, Localize, action)
-        self._get_state = self.create_client(GetState, f'{server_node}/get_state')
-        self._trigger = self.create_client(Trigger, f'{server_node}/trigger')
+        self._action = ActionClient(self, Localize, server.action)
+        self._get_state = self.create_client(GetState, f'{server.node}/get_state')
+        self._trigger = self.create_client(Trigger, f'{server.node}/trigger')
         self._status: Optional[str] = None
-        self.create_subscription(String, f'{server_node}/status', self._on_status, 10)
+        self.create_subscription(String, f'{server.node}/status', self._on_status, 10)
         self._executor = SingleThreadedExecutor(context=self.context)
         self._executor.add_node(self)
         self._running = False                       # a localize() call is under way
@@ -106,34 +112,25 @@ class GlobalLocalizer(Node):
                 self._spin_for(0.1)
         return False
 
-    def localize(self, method: Optional[str] = None, near=None, radius_m: float = 0.0, yaw_tolerance_deg: float = 0.0,
-                 resolve_by_motion_s: float = 0.0, rotate_in_place: bool = False, publish: bool = True,
-                 publish_if_ambiguous: bool = False, angle_step_deg: float = 0.0, timeout_s: float = 0.0,
-                 feedback: Optional[Callable[[Localize.Feedback], None]] = None, maps=()) -> LocalizeResult:
-        """One Localize goal, to its end. `near`: the search prior's centre (Rigid2D or (x, y, yaw) in the map
-        frame, radians) for `radius_m` / `yaw_tolerance_deg` (0: the whole map / any heading); `timeout_s`: how
-        long the server waits for a scan (0: its default); `feedback(msg)` gets each Localize.Feedback (its
-        `stage` is a core.outcome.Stage value); `maps`: the map names to search in the server's map set (empty:
-        every map; the result's `map` names the answer's). Raises TypeError for a field of the wrong type
-        (before anything is sent), NoServer, GoalUnanswered, GoalRejected, ServerGone; whatever else ends the
-        call - KeyboardInterrupt, an exception `feedback` raised - cancels the goal first (12 arguments: a
-        goal's fields and `feedback`, as nav2_simple_commander's calls take them)."""
-        check_goal_types(method=method, near=near, feedback=feedback, numbers=dict(
-            radius_m=radius_m, yaw_tolerance_deg=yaw_tolerance_deg, resolve_by_motion_s=resolve_by_motion_s,
-            angle_step_deg=angle_step_deg, timeout_s=timeout_s), flags=dict(
-            rotate_in_place=rotate_in_place, publish=publish, publish_if_ambiguous=publish_if_ambiguous), maps=maps)
-        centre = near if isinstance(near, Rigid2D) else Rigid2D(*(near or (0.0, 0.0, 0.0)))
-        goal = Localize.Goal(method=method or '', angle_step_deg=float(angle_step_deg), timeout_s=float(timeout_s),
-                             publish_initialpose=bool(publish), publish_if_ambiguous=bool(publish_if_ambiguous),
-                             search_center=Pose2D(x=float(centre.x), y=float(centre.y), theta=float(centre.yaw)),
-                             search_radius_m=float(radius_m), search_yaw_tolerance_deg=float(yaw_tolerance_deg),
-                             resolve_by_motion_s=float(resolve_by_motion_s), rotate_in_place=bool(rotate_in_place),
-                             maps=list(maps))
+    def localize(self, goal: Optional[LocalizeGoal] = None,
+                 feedback: Optional[Callable[[Localize.Feedback], None]] = None) -> LocalizeResult:
+        """One Localize goal, to its end: `goal`'s fields (None: the server's defaults for
+        all); the result's `map` names the answer's map. `feedback(msg)` gets each
+        Localize.Feedback (its `stage` is a core.outcome.Stage value). Raises TypeError for a
+        `feedback` that is not callable (a goal's field of the wrong type already did, when
+        the LocalizeGoal was made), NoServer, GoalUnanswered, GoalRejected, ServerGone;
+        whatever else ends the call - KeyboardInterrupt, an exception `feedback` raised -
+        cancels the goal first."""
+        if feedback is not None and not callable(feedback):
+            raise TypeError(f'feedback must be callable or None, got {type(feedback).__name__}')
+        goal = LocalizeGoal() if goal is None else goal
+        if not isinstance(goal, LocalizeGoal):
+            raise TypeError(f'goal must be a LocalizeGoal or None, got {type(goal).__name__}')
         self._cancel_wanted.clear()
         self._signalled, self._running = False, True
         try:
             with signals_routed_to(self._on_signal, self.cancel_signals):
-                response = self._run_goal(goal, feedback)
+                response = self._run_goal(goal.to_msg(), feedback)
         finally:
             self._running = False
         return LocalizeResult.from_msg(response.result, response.status)
@@ -289,30 +286,6 @@ class GlobalLocalizer(Node):
             raise KeyboardInterrupt(f'signal {signum}')
         self._signalled = True
         self._cancel_wanted.set()
-
-
-def check_goal_types(method, near, feedback, numbers: dict, flags: dict, maps=()) -> None:
-    """TypeError naming the first localize() argument of the wrong type: the generated
-    message conversion would otherwise abort the process (a C assertion) on, say, method=5."""
-    def real(value) -> bool:
-        return isinstance(value, numbers_abc.Real) and not isinstance(value, bool)
-
-    if method is not None and not isinstance(method, str):
-        raise TypeError(f'method must be a str (a matcher name) or None, got {type(method).__name__}')
-    if near is not None and not isinstance(near, Rigid2D):
-        if isinstance(near, (str, bytes)) or not hasattr(near, '__len__') or len(near) != 3 or \
-                not all(map(real, near)):
-            raise TypeError(f'near must be a Rigid2D or (x, y, yaw) numbers, got {near!r}')
-    for name, value in numbers.items():
-        if not real(value):
-            raise TypeError(f'{name} must be a number, got {type(value).__name__}')
-    for name, value in flags.items():
-        if not isinstance(value, (bool, np.bool_)):
-            raise TypeError(f'{name} must be a bool, got {type(value).__name__}')
-    if feedback is not None and not callable(feedback):
-        raise TypeError(f'feedback must be callable or None, got {type(feedback).__name__}')
-    if isinstance(maps, (str, bytes)) or not all(isinstance(m, str) for m in maps):
-        raise TypeError(f'maps must be a sequence of map names (str), got {maps!r}')
 
 
 def _cancel_if_accepted(future) -> None:

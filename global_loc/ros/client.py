@@ -29,7 +29,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from ..core.outcome import Stage
 from ..core.transform import Rigid2D, format_pose
-from .api import GlobalLocalizer, GlobalLocError, GoalRejected, LocalizeResult
+from .api import GlobalLocalizer, GlobalLocError, GoalRejected, LocalizeGoal, LocalizeResult, ServerNames
 
 EXIT_LOCALIZED, EXIT_NOT_LOCALIZED, EXIT_BAD_ARGUMENTS, EXIT_NO_SERVER = 0, 1, 2, 3
 
@@ -99,11 +99,12 @@ def run(localizer: GlobalLocalizer, args) -> int:
         timer.start()
     try:
         near = Rigid2D(args.near[0], args.near[1], math.radians(args.near[2]))
-        result = localizer.localize(
+        goal = LocalizeGoal(
             method=args.method, angle_step_deg=args.angle_step, timeout_s=args.timeout, publish=not args.no_publish,
             publish_if_ambiguous=args.publish_if_ambiguous, near=near,
             radius_m=args.radius, yaw_tolerance_deg=args.yaw_tolerance, resolve_by_motion_s=args.resolve_by_motion,
-            rotate_in_place=args.rotate_in_place, feedback=feedback_printer(args.json), maps=args.maps)
+            rotate_in_place=args.rotate_in_place, maps=args.maps)
+        result = localizer.localize(goal, feedback=feedback_printer(args.json))
     except GlobalLocError as e:
         print(f'error: {e}', file=sys.stderr)
         if args.json:
@@ -121,8 +122,8 @@ def main(argv=None):
     # No rclpy signal handlers: SIGINT and SIGTERM are the localizer's while the goal runs
     # (they cancel it), and outside of it they end the process as they normally would.
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    localizer = GlobalLocalizer('test_global_loc', action=args.action, server_timeout_s=args.server_timeout,
-                                cancel_signals=(signal.SIGINT, signal.SIGTERM))
+    localizer = GlobalLocalizer('test_global_loc', server=ServerNames(action=args.action),
+                                server_timeout_s=args.server_timeout, cancel_signals=(signal.SIGINT, signal.SIGTERM))
     code = EXIT_NOT_LOCALIZED
     try:
         code = run(localizer, args)

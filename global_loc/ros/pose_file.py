@@ -9,6 +9,7 @@ import time
 
 from ..core.pose_history import PoseHistory
 from ..core.stored_pose import (
+    SinceStored,
     StoredPoseError,
     confirm_stored_pose,
     load_stored_pose,
@@ -35,5 +36,5 @@ class PoseFile:
             stored = load_stored_pose(self.path)
         except StoredPoseError as e:
             return None, str(e)
-        return confirm_stored_pose(map_set, points, stored, base_T_laser, self.odometry.at(scan_stamp),
-                                   time.time() - stored.stamp, max_age_s)
+        since = SinceStored(time.time() - stored.stamp, self.odometry.at(scan_stamp))
+        return confirm_stored_pose(map_set, points, stored, base_T_laser, since, max_age_s)

@@ -19,7 +19,7 @@ from typing import Callable, Optional
 from global_loc_interfaces.action import Localize
 
 from ..core.limits import BudgetError
-from ..core.map_set import MapSet, MapSetError, tagged
+from ..core.map_set import MapSet, MapSetError, MapSetPrior, tagged
 from ..core.map_slot import MapSlot
 from ..core.matchers import MethodError
 from ..core.mount import LaserMount
@@ -158,7 +158,7 @@ class RequestPath:
             if result is None:
                 result = localizer.localize_points(view.points, request.method, request.angle_step_deg,
                                                    self.progress(asker), base_T_laser=view.base_T_laser,
-                                                   region=request.region, maps=request.maps)
+                                                   prior=MapSetPrior(request.maps, request.region))
             if not_confirmed:
                 result = dataclasses.replace(result, message=f'{result.message} (searched in full: {not_confirmed})')
         except ScanError as e:      # ViewError, MountError, NoMounting are ScanErrors

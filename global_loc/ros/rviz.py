@@ -8,6 +8,7 @@ import math
 import numpy as np
 from geometry_msgs.msg import PoseArray
 from nav_msgs.msg import OccupancyGrid
+from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..core.local_grid import build_local_grid
@@ -20,27 +21,26 @@ CHOSEN = (0.1, 0.8, 0.2)     # green: the pose the server would publish
 OTHER = (1.0, 0.55, 0.0)     # orange: the other hypotheses
 
 
-def hypotheses_msg(result: LocalizationResult, frame_id: str, stamp) -> PoseArray:
+def hypotheses_msg(result: LocalizationResult, header: Header) -> PoseArray:
     """The hypotheses, best first."""
-    msg = PoseArray()
-    msg.header.frame_id, msg.header.stamp = frame_id, stamp
+    msg = PoseArray(header=header)
     msg.poses = [pose_to_msg(h.pose) for h in result.hypotheses]
     return msg
 
 
-def markers_msg(result: LocalizationResult, frame_id: str, stamp) -> MarkerArray:
+def markers_msg(result: LocalizationResult, header: Header) -> MarkerArray:
     """An arrow and a score label per hypothesis (the best green when it is a success),
-    after a DELETEALL so the previous localization's markers go."""
+    after a DELETEALL (in the header's frame, unstamped) so the previous localization's
+    markers go."""
     out = MarkerArray()
     clear = Marker(action=Marker.DELETEALL)
-    clear.header.frame_id = frame_id
+    clear.header.frame_id = header.frame_id
     out.markers.append(clear)
     for i, h in enumerate(result.hypotheses):
         chosen = i == 0 and result.success
         r, g, b = CHOSEN if chosen else OTHER
         for kind, ns in ((Marker.ARROW, 'hypotheses'), (Marker.TEXT_VIEW_FACING, 'scores')):
-            m = Marker(type=kind, action=Marker.ADD, ns=ns, id=i)
-            m.header.frame_id, m.header.stamp = frame_id, stamp
+            m = Marker(header=header, type=kind, action=Marker.ADD, ns=ns, id=i)
             m.pose = pose_to_msg(h.pose)
             m.color.r, m.color.g, m.color.b, m.color.a = r, g, b, 1.0
             if kind == Marker.ARROW:
@@ -55,14 +55,12 @@ def markers_msg(result: LocalizationResult, frame_id: str, stamp) -> MarkerArray
 
 
 def local_map_msg(points: ScanPoints, resolution: float, closing_kernel: int, map_T_laser: Rigid2D,
-                  frame_id: str, stamp, max_range: float = math.inf) -> OccupancyGrid:
+                  header: Header, max_range: float = math.inf) -> OccupancyGrid:
     """The scan's local map (rasterized, cropped, closed: core.local_grid) placed with the
-    laser at `map_T_laser`; obstacle cells 100, the rest unknown. (7 arguments: the local
-    grid's own parameters, the pose it is shown at, and the message's header.)"""
+    laser at `map_T_laser` in the header's frame; obstacle cells 100, the rest unknown."""
     local = build_local_grid(points, resolution, closing_kernel, max_range=max_range)
     map_T_grid = map_T_laser * local.grid_T_laser().inverse()
-    msg = OccupancyGrid()
-    msg.header.frame_id, msg.header.stamp = frame_id, stamp
+    msg = OccupancyGrid(header=header)
     msg.info.resolution = float(resolution)
     msg.info.width, msg.info.height = local.width, local.height
     msg.info.origin = pose_to_msg(map_T_grid)

@@ -148,7 +148,7 @@ class SensorMounts:
             except Exception:   # tf2 raises several types; any means "not known"
                 return None
             p, q = t.translation, t.rotation
-            return Mount3D.from_quaternion(p.x, p.y, p.z, q.x, q.y, q.z, q.w)
+            return Mount3D.from_quaternion(p.x, p.y, p.z, q)
         found = self.static.lookup(self.base_frame, frame) if self.static is not None else None
         if found is None:
             return None

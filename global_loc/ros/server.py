@@ -23,7 +23,7 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
-from std_msgs.msg import String
+from std_msgs.msg import Header, String
 from std_srvs.srv import Empty, Trigger
 from visualization_msgs.msg import MarkerArray
 
@@ -284,13 +284,13 @@ class GlobalLocServer(LifecycleNode):
 
     def show(self, result, points, base_T_laser, stamp, occupancy_map) -> None:
         """The RViz topics for this localization."""
-        frame = self.config['map_frame']
-        self.pubs['hypotheses'].publish(hypotheses_msg(result, frame, stamp))
-        self.pubs['markers'].publish(markers_msg(result, frame, stamp))
+        header = Header(frame_id=self.config['map_frame'], stamp=stamp)
+        self.pubs['hypotheses'].publish(hypotheses_msg(result, header))
+        self.pubs['markers'].publish(markers_msg(result, header))
         if result.pose is not None:
             self.pubs['local_map'].publish(local_map_msg(points, occupancy_map.resolution,
                                                          self.config['opening_kernel'], result.pose * base_T_laser,
-                                                         frame, stamp, occupancy_map.diagonal_m))
+                                                         header, occupancy_map.diagonal_m))
 
     # ---- requests -------------------------------------------------------------------------
     def on_cancel(self, goal_handle) -> CancelResponse:

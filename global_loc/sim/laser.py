@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 
-@dataclass
+@dataclass(frozen=True)
 class LaserConfig:
     fov_deg: float = 270.0
     num_beams: int = 541

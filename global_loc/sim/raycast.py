@@ -28,17 +28,19 @@ def raycast_ranges(occupancy_map: OccupancyMap, laser_pose: Rigid2D, angles: np.
     return np.where(hits <= range_max, hits, np.inf)
 
 
-def simulate_scan(occupancy_map: OccupancyMap, laser_pose: Rigid2D, fov_deg: float = 270.0,
-                  num_beams: int = 541, range_max: float = 20.0, range_min: float = 0.05,
-                  noise_std: float = 0.0, dropout: float = 0.0, rng=None) -> Scan:
-    """A LaserScan-like Scan centred on the laser's x axis; no-return beams are inf,
-    dropouts NaN, Gaussian range noise `noise_std` metres. (9 arguments: the map, the pose
-    and the laser's model, named as the simulator node's parameters.)"""
+# simulate_scan's laser unless one is given: the simulator's beams, without noise or dropouts.
+EXACT_LASER = LaserConfig(noise_std=0.0, dropout=0.0)
+
+
+def simulate_scan(occupancy_map: OccupancyMap, laser_pose: Rigid2D, laser: LaserConfig = EXACT_LASER,
+                  rng=None) -> Scan:
+    """A LaserScan-like Scan of `laser` (its beams and faults, as the simulator node's
+    parameters name them; its rate is not used) centred on the laser's x axis; no-return
+    beams are inf, dropouts NaN, Gaussian range noise `laser.noise_std` metres."""
     rng = np.random.default_rng() if rng is None else rng
-    laser = LaserConfig(fov_deg, num_beams, range_min, range_max, noise_std, dropout)
     angle_min, increment, angles = laser.angles()
-    ranges = laser.corrupt(raycast_ranges(occupancy_map, laser_pose, angles, range_max), rng)
-    return Scan(angle_min, increment, range_min, range_max, ranges)
+    ranges = laser.corrupt(raycast_ranges(occupancy_map, laser_pose, angles, laser.range_max), rng)
+    return Scan(angle_min, increment, laser.range_min, laser.range_max, ranges)
 
 
 def sample_free_poses(occupancy_map: OccupancyMap, n: int, rng, clearance: float = 0.4) -> list[Rigid2D]:

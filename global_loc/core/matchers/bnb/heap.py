@@ -22,7 +22,9 @@ def heap_key(bound, level):
 
 @njit(cache=True, nogil=True)
 def heap_push(keys, nodes, size, key, u, v, a):
-    """Push a node (its level is in its key); returns (keys, nodes), grown when full."""
+    """Push a node (its level is in its key); returns (keys, nodes), grown when full. (7
+    arguments: a compiled kernel takes no Python object cheaply, so the heap comes as its
+    arrays and the node as its numbers.)"""
     n = size[0]
     if n == keys.shape[0]:
         grown_keys = np.empty(2 * n + 16, np.int64)

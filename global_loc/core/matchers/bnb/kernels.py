@@ -69,7 +69,8 @@ def plane_value(planes, start, h, x, y):
 @njit(cache=True, nogil=True)
 def point_values(planes, tables, u, v, a, h, out, plane_shift):
     """Each point's term of the node's bound, into out: from the optimistic planes
-    (plane_shift 0) or their evidence twins (plane_shift planes.evidence)."""
+    (plane_shift 0) or their evidence twins (plane_shift planes.evidence). (8 arguments:
+    a compiled kernel takes no Python object cheaply, so a node comes as its numbers.)"""
     row = tables.row_start[h] + (a >> h)
     for i in range(tables.du.shape[1]):
         out[i] = plane_value(planes, tables.base[h, i] + plane_shift, h, u + planes.pad + tables.du[row, i],
@@ -79,7 +80,8 @@ def point_values(planes, tables, u, v, a, h, out, plane_shift):
 @njit(cache=True, nogil=True)
 def node_bound(planes, tables, u, v, a, h, terms):
     """(bound, evidence bound) of node (u, v, a, h); at level 0 a pose's exact (score,
-    evidence). terms: scratch, one per point."""
+    evidence). terms: scratch, one per point. (7 arguments: a compiled kernel takes no
+    Python object cheaply, so a node comes as its numbers.)"""
     point_values(planes, tables, u, v, a, h, terms, 0)
     total = terms.sum()
     if planes.evidence == 0:
@@ -97,7 +99,9 @@ def child_bound(planes, tables, u, v, a, h, parent, parent_rest, ev_parent, ev_r
     Capped terms never exceed the parent's, so as soon as the sums so far plus the parent's
     terms for the points left (parent_rest[i + 1], ev_rest[i + 1]) bound below `floor`, the
     child is pruned: the bound returned is then below `floor` too. Most children are
-    pruned, most of them after a few points."""
+    pruned, most of them after a few points. (11 arguments: a compiled kernel takes no
+    Python object cheaply, so the child comes as its numbers and its parent's terms as
+    arrays.)"""
     row = tables.row_start[h] + (a >> h)
     total = 0
     if planes.evidence == 0:      # one set of planes (the default): half the reads, on the hot path
@@ -133,7 +137,8 @@ def node_bounds(planes, tables, tu, tv, ta, h):
 def child_node(free, space, u, v, a, h, c):
     """Child c (0..7: the 4 quarter blocks x the 2 halves of the angles) of node (u, v, a,
     h): (u, v, a) and whether it is searched at all - inside the map and the angles, on a
-    block holding a free cell, holding a pose of the search prior."""
+    block holding a free cell, holding a pose of the search prior. (7 arguments: a
+    compiled kernel takes no Python object cheaply, so the node comes as its numbers.)"""
     half = 1 << (h - 1)
     cu = u + (c & 1) * half
     cv = v + ((c >> 1) & 1) * half
@@ -182,6 +187,8 @@ def search_step(planes, tables, free, space, held, heap, shared_best, budget, pe
     it (search.Resume). The caller prunes the leaves by the final threshold. Counts
     expansions per level into per_level.
     Returns (expansions, done, leaves (m, 5): u, v, a, optimistic score, evidence, heap).
+    (9 arguments: a compiled kernel takes no Python object cheaply, so the search comes as
+    named tuples and arrays.)
     """
     keys, nodes, size = heap
     leaves = np.empty((64, 5), np.int64)
@@ -250,7 +257,8 @@ def dive(planes, tables, free, space, u, v, a, h):
     v, angle index, exact score), score -1 if no child qualified (not for a node on a
     free block in the prior: one of its children holds the same free cell). The search's
     first incumbent, so that it holds a leaf before its first slice ends. The leaf's row
-    is (u, v, angle index, optimistic score, evidence)."""
+    is (u, v, angle index, optimistic score, evidence). (8 arguments: a compiled kernel
+    takes no Python object cheaply, so the node comes as its numbers.)"""
     terms = np.empty(tables.du.shape[1], np.int64)
     while h > 0:
         best_bound, best_ev, bu, bv, ba = np.int64(-1), np.int64(-1), u, v, a
