@@ -2,8 +2,6 @@
 of io/messages.py (which need no rclpy: the offline commands read bags with them)."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from geometry_msgs.msg import Pose, PoseArray, PoseWithCovarianceStamped, Quaternion
 from nav_msgs.msg import OccupancyGrid
@@ -15,7 +13,7 @@ from ..core.localizer import LocalizationResult
 from ..core.map_io import OccupancyMap, from_occupancy_grid
 from ..core.outcome import Outcome
 from ..core.scan import Scan
-from ..core.transform import Rigid2D, yaw_of_quaternion
+from ..core.transform import Rigid2D, quaternion_of_rpy, yaw_of_quaternion
 
 # the readers serve rclpy and rosbags messages alike (io/messages.py); the nodes import them from here too
 from ..io.messages import pose_from_msg, scan_from_msg, stamp_seconds  # noqa: F401
@@ -32,7 +30,9 @@ def scan_to_msg(scan: Scan, frame_id: str, stamp, scan_time: float = 0.0) -> Las
 
 
 def yaw_to_quaternion(yaw: float) -> Quaternion:
-    return Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
+    """The message of a heading's quaternion (core/transform owns the formula)."""
+    x, y, z, w = quaternion_of_rpy(0.0, 0.0, yaw)
+    return Quaternion(x=x, y=y, z=z, w=w)
 
 
 def pose_to_msg(p: Rigid2D) -> Pose:
