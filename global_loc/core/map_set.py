@@ -221,8 +221,8 @@ class MapSet:
 
     def raced_leaves(self, points, names: list[str], base_T_laser, region) -> dict[str, float]:
         """The best leaf bnb's tree search finds on each map, in rounds: every map not yet done
-        searched within a node budget (RACE_NODES, growing RACE_GROWTH-fold each round up to
-        bnb's own max_nodes), the best leaf of any map so far as its incumbent. A map is done
+        searched within a round's node budget (PROBE_NODES: a few hundred, then a few thousand
+        expansions), the best leaf of any map so far as its incumbent. A map is done
         when its search ends within the budget. The map the scan fits finds a high leaf in an
         early round; with it as the incumbent, a map the scan does not fit is proved to hold
         no place in its band in a fraction of a search. The leaves only order the maps and
