@@ -136,22 +136,29 @@ def test_the_simulator_publishes_its_sensors_mountings_from_its_urdf(tmp_path):
         assert sim.stop() == 0, sim.output()
 
 
+def assert_base_pose_from_tf_static(env, server, sim, received: str, mounting: str):
+    """Once the server logs `received`, a goal answers base_link's true pose, and the log says
+    the sensor's mounting came from /tf_static; both processes then stop."""
+    try:
+        # discovery can take 2 s to match the two; a request before it finds no mounting from tf
+        server.wait_for_output(f'/tf_static: {received} received', timeout=10)
+        code, result = localize(env, '--timeout', '20', '--no-publish')
+        assert code == 0 and result['outcome'] == 'localized', result
+        assert_pose_near(pose_of(result), TRUTH, TIGHT_M, TIGHT_DEG)
+        assert mounting in server.output()
+    finally:
+        sim.stop()
+        assert server.stop() == 0, server.output()
+
+
 def test_the_simulated_lidar_alone_localizes_with_no_mounting_given(tmp_path):
     env = isolated_env()
     sim = start_sim(env, tmp_path / 'sim.log', f'map_yaml:={OFFICE_YAML}', 'lidar3d:=true', f'x:={TRUTH.x}',
                     f'y:={TRUTH.y}', f'yaw:={TRUTH.yaw}')
     server = start_server(env, tmp_path / 'server.log', f'map_yaml:={OFFICE_YAML}', 'scan_topics:=[]',
                           'cloud_topics:=[/points]')
-    try:
-        # discovery can take 2 s to match the two; a request before it finds no mounting for /points
-        server.wait_for_output('/tf_static: base_link -> laser, base_link -> lidar received', timeout=10)
-        code, result = localize(env, '--timeout', '20', '--no-publish')
-        assert code == 0 and result['outcome'] == 'localized', result
-        assert_pose_near(pose_of(result), TRUTH, TIGHT_M, TIGHT_DEG)
-        assert '/points: mounting from /tf_static (base_link -> lidar): x=0.000 y=0.000 z=0.500' in server.output()
-    finally:
-        sim.stop()
-        assert server.stop() == 0, server.output()
+    assert_base_pose_from_tf_static(env, server, sim, 'base_link -> laser, base_link -> lidar',
+                                    '/points: mounting from /tf_static (base_link -> lidar): x=0.000 y=0.000 z=0.500')
 
 
 def test_the_front_laser_gives_the_bases_pose_without_laser_x_from_a_late_tf_static(tmp_path):
@@ -160,12 +167,5 @@ def test_the_front_laser_gives_the_bases_pose_without_laser_x_from_a_late_tf_sta
     env = isolated_env()
     server = start_server(env, tmp_path / 'server.log', f'map_yaml:={OFFICE_YAML}')
     sim = start_sim(env, tmp_path / 'sim.log', f'x:={TRUTH.x}', f'y:={TRUTH.y}', f'yaw:={TRUTH.yaw}')
-    try:
-        server.wait_for_output('/tf_static: base_link -> laser received', timeout=10)
-        code, result = localize(env, '--timeout', '20', '--no-publish')
-        assert code == 0 and result['outcome'] == 'localized', result
-        assert_pose_near(pose_of(result), TRUTH, TIGHT_M, TIGHT_DEG)
-        assert '/scan: mounting from /tf_static (base_link -> laser): x=0.160 y=0.000 z=0.300' in server.output()
-    finally:
-        sim.stop()
-        assert server.stop() == 0, server.output()
+    assert_base_pose_from_tf_static(env, server, sim, 'base_link -> laser',
+                                    '/scan: mounting from /tf_static (base_link -> laser): x=0.160 y=0.000 z=0.300')
