@@ -41,7 +41,19 @@ from .options import BranchAndBoundOptions
 from .peaks import PeakRefiner
 from .refine import refine
 from .refine import warm_up as warm_up_refine
-from .search import Resume, SearchRun, SearchStats, SettledFn, ThreadedSearch, kept_leaves, search_threads, top_in_band
+from .search import (
+    Resume,
+    RunLimits,
+    SearchInput,
+    SearchRun,
+    SearchStart,
+    SearchStats,
+    SettledFn,
+    ThreadedSearch,
+    kept_leaves,
+    search_threads,
+    top_in_band,
+)
 from .verdict import confident_fit, explained_share, judge, needed_lead
 
 
@@ -180,9 +192,10 @@ class BranchAndBoundMatcher(Matcher):
         # the progress reported goes on from where the first search left it (a cancel stops it too)
         report = (lambda fraction, best: progress(0.95, best)) if progress else None
         start = time.perf_counter()
-        run = self.searcher.run(self.stack.planes, tables, self.stack.free, tree.space,
-                                np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, left, report,
-                                tree.deadline, rival_proved, evidence, None)
+        run = self.searcher.run(SearchInput(self.stack.planes, tables, self.stack.free),
+                                SearchStart(tree.space, np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top,
+                                            evidence),
+                                RunLimits(left, tree.deadline, report), rival_proved)
         expansions = int(first.per_level.sum() + run.per_level.sum())
         stopped = '' if run.exact or run.settled else stop_reason(expansions, max_nodes, options.max_search_s)
         # a pose both searches kept once, with its optimistic score (an exhaustive second search
@@ -242,10 +255,10 @@ class BranchAndBoundMatcher(Matcher):
         # 2. Branch and bound down to the band below the best leaf (verdict.searched_keep).
         search_start = time.perf_counter()
         resume = self.resume_rule(space, pts, d0, points)
-        run = self.searcher.run(self.stack.evidence_planes, tables, self.stack.free, space,
-                                np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top, max_nodes, progress,
-                                deadline, self.settled_check(pts, d0, points),
-                                int(options.incumbent * 255 * len(pts)), resume)
+        run = self.searcher.run(SearchInput(self.stack.evidence_planes, tables, self.stack.free),
+                                SearchStart(space, np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top,
+                                            int(options.incumbent * 255 * len(pts))),
+                                RunLimits(max_nodes, deadline, progress), self.settled_check(pts, d0, points), resume)
         search_s = time.perf_counter() - search_start
         scores = run.leaves[:, 4] / (255.0 * len(pts))      # evidence
         expansions = int(run.per_level.sum())

@@ -11,7 +11,7 @@ from ..base import Candidate, apart, distinct
 from .free_space import clear_returns, on_unknown, see_through_fractions
 from .grids import PrecomputationGridStack
 from .options import BranchAndBoundOptions
-from .refine import bin_maxima, field_samples, landscape_covariance, refine
+from .refine import PeakBins, PixelPose, bin_maxima, field_samples, landscape_covariance, refine
 
 
 class PeakRefiner:
@@ -29,8 +29,8 @@ class PeakRefiner:
         opt = self.options
         frame = self.map.frame
         tu, tv, ta, scores = leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, column] / norm
-        bins = bin_maxima(tu, tv, ta, scores, d0, self.map.height, opt.distinct_m / self.map.resolution / 2,
-                          opt.distinct_angle / 2)
+        bins = bin_maxima(leaves, scores, d0, self.map.height,
+                          PeakBins(opt.distinct_m / self.map.resolution / 2, opt.distinct_angle / 2))
         return distinct([Candidate(frame.pixel_pose_to_world(float(tu[i]), float(tv[i]), float(ta[i] * d0)),
                                    float(scores[i])) for i in bins],
                         opt.hypotheses, opt.distinct_m, opt.distinct_angle)
@@ -69,8 +69,8 @@ class PeakRefiner:
                          see_through=float(through[i]), optimistic=float(optimistic[i]), unknown=unknown[i])
                for i in order]
         if out:
-            out[0].covariance = landscape_covariance(self.stack.field, frame, *refined[order[0], :3], pts,
-                                                     opt.sigma_cells)
+            out[0].covariance = landscape_covariance(self.stack.field, frame, PixelPose(*refined[order[0], :3]),
+                                                     pts, opt.sigma_cells)
         return [c.score for c in peaks], [float(f) for f in refined[:, 3]], out
 
     def unknown_scores(self, refined: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, list[float]]:

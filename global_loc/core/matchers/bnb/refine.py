@@ -6,6 +6,7 @@ around the chosen peak. Poses here are (u, v, yaw): pixel position and grid-fram
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -62,13 +63,20 @@ def field_samples(field, poses, px, py):
     return out
 
 
-def bin_maxima(tu, tv, ta, scores, d0: float, map_height: int, distinct_cells: float, distinct_angle: float,
+class PeakBins(NamedTuple):
+    """The bins a peak is the best of: distinct_cells^2 cells x distinct_angle rad."""
+    cells: float
+    angle: float
+
+
+def bin_maxima(leaves: np.ndarray, scores: np.ndarray, d0: float, map_height: int, bins: PeakBins,
                limit: int = 512) -> np.ndarray:
-    """Indices of the best leaf in each bin of distinct_cells^2 cells x distinct_angle,
-    the `limit` best of them, best first. The non-maximum suppression then sees a few
-    hundred poses, not every leaf: a featureless view (a 60 deg glimpse of a straight
-    wall) leaves a million poses within keep_ratio of the best. (9 arguments: the leaves'
-    columns as the compiled search returns them, and the bins' size in cells and radians.)"""
+    """Indices of the best leaf (rows u, v, angle index: the compiled search's columns) in
+    each of the `bins`, the `limit` best of them, best first. The non-maximum suppression
+    then sees a few hundred poses, not every leaf: a featureless view (a 60 deg glimpse of
+    a straight wall) leaves a million poses within keep_ratio of the best."""
+    tu, tv, ta = leaves[:, 0], leaves[:, 1], leaves[:, 2]
+    distinct_cells, distinct_angle = bins
     cell = max(1, int(distinct_cells))
     a_bin = max(1, int(distinct_angle / d0))
     ku, kv, ka = tu // cell, tv // cell, ta // a_bin
@@ -102,7 +110,14 @@ def refine(field: np.ndarray, u: float, v: float, yaw: float, pts: np.ndarray, r
     return u + z[0], v + z[1], yaw + z[2] * yaw_unit, -cost(z)
 
 
-def landscape_covariance(field: np.ndarray, frame: GridFrame, u: float, v: float, yaw: float, pts: np.ndarray,
+class PixelPose(NamedTuple):
+    """A pose in the map's pixels as the refinement gives it: column u, row v, heading."""
+    u: float
+    v: float
+    yaw: float
+
+
+def landscape_covariance(field: np.ndarray, frame: GridFrame, peak: PixelPose, pts: np.ndarray,
                          sigma_cells: float, half: int = 3) -> np.ndarray:
     """(x, y, yaw) covariance in the world frame: the score landscape around a peak plus
     the disagreement of the scan and the map at it (residual_spread).
@@ -112,9 +127,8 @@ def landscape_covariance(field: np.ndarray, frame: GridFrame, u: float, v: float
     answer's uncertainty along a corridor or round a pillar. Near a good fit it is
     narrower than a cell: what remains is not the points' independent noise but what they
     share, the map drawn at its resolution and registered from another run, so the
-    residuals at the peak say how far the pose may be off (residual_spread). (8 arguments:
-    a field, its frame, the peak's pixel pose u, v, yaw as the refinement gives it, the
-    points, the field's sigma in cells and the grid's half width.)"""
+    residuals at the peak say how far the pose may be off (residual_spread)."""
+    u, v, yaw = peak
     res = frame.resolution
     d_yaw = one_cell_angle(pts, res)
     steps = np.arange(-half, half + 1, dtype=float)
@@ -126,24 +140,23 @@ def landscape_covariance(field: np.ndarray, frame: GridFrame, u: float, v: float
     offsets = np.stack([*frame.pixel_steps_to_grid(du, dv), da], axis=1)
     mean = w @ offsets
     cov = (offsets - mean).T @ ((offsets - mean) * w[:, None])
-    spread, reach = residual_spread(field, u, v, yaw, pts, res, sigma_cells)
+    spread, reach = residual_spread(field, peak, pts, res, sigma_cells)
     # a shift of length d: d^2 / 2 on each axis; a turn moving the points by d at their range
     cov += np.diag([spread * res ** 2 / 2, spread * res ** 2 / 2, spread / reach ** 2])
     return frame.covariance_to_world(cov)
 
 
-def residual_spread(field: np.ndarray, u: float, v: float, yaw: float, pts: np.ndarray, resolution: float,
+def residual_spread(field: np.ndarray, peak: PixelPose, pts: np.ndarray, resolution: float,
                     sigma_cells: float) -> tuple[float, float]:
     """(mean squared residual, RMS range) in cells of the points the map explains at the
     pose (within 3 sigma of a wall: the field exp(-d^2 / 2 sigma^2) read back as d). A scan
     and a map that disagree by d at every wall - the map's cells (at least a uniform cell's
     1/12), a map built from another run registered a few cm differently, the scan's noise
     - hold the pose only to about d: a shift of d, or a turn moving the points by d at
-    their range, fits about as well. (7 arguments: the field, the pose, the points, the
-    map's resolution and the field's sigma in cells.)"""
+    their range, fits about as well."""
     px, py = pts[:, 0] / resolution, pts[:, 1] / resolution
     within = math.exp(-0.5 * 3.0 ** 2)      # the field 3 sigma from a wall
-    f = field_samples(field, np.array([[u, v, yaw]]), px, py)[0]
+    f = field_samples(field, np.array([list(peak)]), px, py)[0]
     explained = f > within
     if explained.sum() < 3:
         explained = np.ones(len(f), bool)

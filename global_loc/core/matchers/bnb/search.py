@@ -50,6 +50,32 @@ class SearchStats:
 SettledFn = Callable[[np.ndarray, int], bool]
 
 
+class SearchInput(NamedTuple):
+    """What the compiled kernels read (arrays and named tuples, not objects): the map's
+    planes and free blocks, and the scan's tables."""
+    planes: Planes
+    tables: ScanTables
+    free: FreeBlocks
+
+
+class SearchStart(NamedTuple):
+    """Where a search starts: its space (the map, the band's options, the prior), the top
+    nodes (rows u, v, a, raw bound) at top_level, and a raw score some place is known to
+    reach (MatchOptions.incumbent), pruned by from the start."""
+    space: SearchSpace
+    top_nodes: np.ndarray
+    top_level: int
+    incumbent: int = 0
+
+
+class RunLimits(NamedTuple):
+    """When a search stops short: after max_nodes expansions or at the deadline
+    (time.monotonic()); `progress` is told between slices (a cancel raises there)."""
+    max_nodes: int
+    deadline: float = math.inf
+    progress: Optional[ProgressFn] = None
+
+
 class Resume(NamedTuple):
     """A lower floor the search can resume with once its own band is searched: the nodes
     and leaves above `space`'s floor are held meanwhile, so the resumed search expands
@@ -102,29 +128,27 @@ class ThreadedSearch:
         return np.concatenate(list(self._executor(threads).map(
             lambda chunk: node_bounds(planes, tables, *chunk, level), chunks)))
 
-    def run(self, planes: Planes, tables: ScanTables, free: FreeBlocks, space: SearchSpace, top_nodes: np.ndarray,
-            top_level: int, max_nodes: int, progress: Optional[ProgressFn],
-            deadline: float = math.inf, settled: Optional[SettledFn] = None, incumbent: int = 0,
+    def run(self, given: SearchInput, begin: SearchStart, limits: RunLimits, settled: Optional[SettledFn] = None,
             resume: Optional[Resume] = None) -> SearchRun:
         """Expand every node whose bound reaches the best leaf's band (keep_floor), from the top
-        nodes (rows u, v, a, bound). (12 arguments: the compiled kernels' inputs, which take
-        arrays and named tuples, not objects, and the match's limits.) Returns the leaves
-        scoring that high (rows u, v, angle index, raw score) in pose order, the expansions
-        per level, whether the search was exhaustive (not stopped by max_nodes or the
-        deadline, time.monotonic()), whether `settled` ended it and whether it resumed. It
-        holds a leaf from the start (a greedy dive from each thread's best top node), so a
-        search stopped at once still returns its best leaf found.
+        nodes. Returns the leaves scoring that high (rows u, v, angle index, raw score) in
+        pose order, the expansions per level, whether the search was exhaustive (not stopped
+        by the limits), whether `settled` ended it and whether it resumed. It holds a leaf
+        from the start (a greedy dive from each thread's best top node), so a search stopped
+        at once still returns its best leaf found.
 
         settled(leaves, top): called between slices with the leaves kept so far and the
         highest bound still pending (raw; no leaf not scored yet scores more); True ends the
-        search there - for an answer the rest cannot change. incumbent: a raw score some
-        place is known to reach (MatchOptions.incumbent), pruned by from the start. resume:
-        once `space`'s band is searched, resume.needed(its leaves) says whether to go on with
-        resume.space's (lower) floor."""
+        search there - for an answer the rest cannot change. resume: once the start's band
+        is searched, resume.needed(its leaves) says whether to go on with resume.space's
+        (lower) floor."""
+        planes, tables, free = given
+        space, top_level = begin.space, begin.top_level
+        max_nodes, deadline, progress = limits
         threads = search_threads()
-        heaps, found = start(planes, tables, free, space, top_nodes, top_level, threads)
+        heaps, found = start(given, begin, threads)
         shared_best = np.zeros(PAD, np.int64)
-        shared_best[0] = max(found[0][:, 4].max(initial=0), incumbent)
+        shared_best[0] = max(found[0][:, 4].max(initial=0), begin.incumbent)
         per_level = [np.zeros(max(top_level + 1, PAD), np.int64) for _ in heaps]   # PAD: see kernels
         expanded, done = 0, [False] * threads
         held = resume.space if resume is not None else space
@@ -164,11 +188,11 @@ class ThreadedSearch:
         return result(all(done))
 
 
-def start(planes: Planes, tables: ScanTables, free: FreeBlocks, space: SearchSpace, top_nodes: np.ndarray,
-          top_level: int, threads: int) -> tuple[list, list[np.ndarray]]:
+def start(given: SearchInput, begin: SearchStart, threads: int) -> tuple[list, list[np.ndarray]]:
     """One heap per thread, the best top nodes dealt evenly, and the leaves of a greedy dive
-    from each thread's best (the first incumbent: a real leaf, so the result is the same).
-    (7 arguments: the compiled kernels' inputs and the thread count.)"""
+    from each thread's best (the first incumbent: a real leaf, so the result is the same)."""
+    planes, tables, free = given
+    space, top_nodes, top_level = begin.space, begin.top_nodes, begin.top_level
     order = np.argsort(-top_nodes[:, 3], kind='stable')
     heaps = [make_heap(top_nodes[order[k::threads]], top_level) for k in range(threads)]
     dived = np.stack([dive(planes, tables, free, space, *top_nodes[i, :3], top_level) for i in order[:threads]])

@@ -4,6 +4,7 @@ it for users). A search stopped short is judged in base.Matcher.judge."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -166,15 +167,23 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
             if best.see_through else ''
         return Verdict(Outcome.POOR_MATCH, conf, f'poor match: the map explains about {100 * best.score:.0f}% of the '
                                                  f'scan{crossing}')
-    return ambiguous_verdict(best, others, ranks, fit[0], need, margin, conf)
+    return ambiguous_verdict(best, others, ranks, LeadFigures(fit[0], need, margin, conf))
 
 
-def ambiguous_verdict(best: Candidate, others: list[Candidate], ranks, best_fit: float, need: float, margin: float,
-                      conf: float) -> Verdict:
+class LeadFigures(NamedTuple):
+    """judge's figures, passed on rather than computed twice: the best's field score, the
+    lead a confident answer needs, the margin it has and the confidence."""
+    best_fit: float
+    need: float
+    margin: float
+    conf: float
+
+
+def ambiguous_verdict(best: Candidate, others: list[Candidate], ranks, figures: LeadFigures) -> Verdict:
     """judge's `ambiguous`, saying why: a rival only for what the map does not say, one
     whose beams cross walls, or places within the lead (`ranks`: the others' rival
-    ranking scores); the closest named when it is the best's twin (a half turn). (7
-    arguments: judge's figures, passed on rather than computed twice.)"""
+    ranking scores); the closest named when it is the best's twin (a half turn)."""
+    best_fit, need, margin, conf = figures
     closest = others[int(np.argmax(ranks))] if others else None
     twin = '; the closest is the best turned by about 180 deg (a symmetric place: its twin)' \
         if closest is not None and is_twin(best, closest) else ''
