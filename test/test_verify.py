@@ -4,7 +4,6 @@ where rotated template matching is confidently wrong by its own verdict (the bes
 next by 1%) are not confident once checked; one it gets right stays right and confident."""
 import json
 
-import numpy as np
 import pytest
 
 from conftest import OFFICE_YAML, seeded_office_scans
@@ -63,26 +62,3 @@ def test_only_a_matcher_that_scores_a_pose_is_a_tracker_and_the_localizer_says_w
         assert localizer.tracker(method).name == TRACKER_METHOD
     assert localizer.tracker() is localizer.matcher(TRACKER_METHOD)
     assert localizer.tracker('bnb') is localizer.matcher('bnb')
-
-
-def test_features_on_views_of_the_map_find_scans_the_thesis_features_do_not(office_scans):
-    """ORB on the map image (the thesis's path here) proposes nothing on these scans;
-    SIFT on wall fields of views of the map as the laser would see them finds some, each
-    checked on the map, none confidently wrong."""
-    office, scans = office_scans
-    localizer = Localizer(office)
-    views = [localizer.localize(scan, 'features_views') for scan, _ in scans]
-    thesis = [localizer.localize(scan, 'features_orb') for scan, _ in scans]
-    assert sum(r.success for r in thesis) == 0
-    right = [r.success and pose_correct(r.pose, truth) for r, (_, truth) in zip(views, scans, strict=True)]
-    assert sum(right) >= 2, [r.message for r in views]
-    assert all(ok or not r.success for ok, r in zip(right, views, strict=True))
-
-
-def test_a_wall_field_falls_from_the_walls_to_zero_at_its_reach():
-    from global_loc.core.local_grid import wall_field
-    image = np.zeros((21, 21), np.uint8)
-    image[10, :] = 255
-    field = wall_field(image, 8.0)
-    # (cv2.DIST_L2 with a 3x3 mask: distances within a few per cent)
-    assert field[10, 5] == 255 and field[0, 5] == 0 and field[14, 5] == pytest.approx(255 * (1 - 4 / 8), abs=8)
