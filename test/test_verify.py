@@ -62,3 +62,32 @@ def test_only_a_matcher_that_scores_a_pose_is_a_tracker_and_the_localizer_says_w
         assert localizer.tracker(method).name == TRACKER_METHOD
     assert localizer.tracker() is localizer.matcher(TRACKER_METHOD)
     assert localizer.tracker('bnb') is localizer.matcher('bnb')
+
+
+def test_where_the_tracker_found_the_proposed_place_its_own_peak_stands_for_it():
+    """A refined proposal carries two of the measures the tracker's verdict reads; the tracker's
+    own peak at that place carries them all (a rival's unknown cells among them), so it is kept."""
+    from global_loc.core.matchers.base import Candidate, Match, MatchOptions, Verdict
+    from global_loc.core.matchers.verify import verify
+    from global_loc.core.transform import Rigid2D
+
+    class Checker:
+        name, distinct_m, distinct_angle = 'bnb', 1.0, 0.35
+        peak = Candidate(Rigid2D(1.0, 0.0, 0.0), 0.64, explained=0.65, see_through=0.0, optimistic=0.9, unknown=0.3)
+
+        def fit_at(self, points, pose):
+            return 0.66, 0.0, pose
+
+        def match(self, points, options, progress=None):
+            return Match([Candidate(Rigid2D(5.0, 0.0, 0.0), 0.75, explained=0.75, see_through=0.0), self.peak])
+
+        def distinct(self, candidates):
+            return candidates
+
+        def judge(self, candidates, stopped='', settled='', stats=None):
+            self.judged = candidates
+            return Verdict(Outcome.AMBIGUOUS, 0.0, 'ambiguous')
+
+    checker = Checker()
+    verify('features', [Candidate(Rigid2D(1.1, 0.0, 0.02), 10.0)], None, checker, MatchOptions())
+    assert checker.peak in checker.judged and len(checker.judged) == 2
