@@ -43,9 +43,9 @@ def resolve_method(name: str) -> str:
 # Peak bytes a thesis matcher's precomputation allocates per map cell (peak RSS measured at
 # 2000 x 2000: templates and ORB 9, SIFT 236; SURF's Hessian pyramid and AKAZE's nonlinear
 # scale space are float images per level as SIFT's: counted alike, not measured - this
-# OpenCV build has neither). features: its kept descriptors capped at 80 a cell
-# (scan_features.DESCRIPTOR_BYTES_PER_CELL), the distance field 4, and the views' features
-# before their duplicates go (half precision); 102-118 measured on the shared maps, docs/decisions/0021).
+# OpenCV build has neither). features: its kept descriptors capped at 56 a cell
+# (scan_features.DESCRIPTOR_BYTES_PER_CELL), twice while FLANN merges its copy, the distance field 4,
+# and a view's transient arrays, ~25 MB whatever the map: docs/decisions/0021 has the peaks measured).
 BUILD_BYTES_PER_CELL = {'template_ccoeff': 16, 'template_sqdiff': 16, 'features_orb': 24, 'features_sift': 256,
                         'features_akaze': 256, 'features_surf': 256,
                         'features': 128}

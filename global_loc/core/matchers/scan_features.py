@@ -32,10 +32,12 @@ from .point_features import DIMENSIONS, PointFeatureOptions, point_features, pos
 
 FLANN_INDEX_KDTREE = 1
 VIEW_CHUNK = 128              # views ray-cast at a time (their hits: 128 x rays x 8 bytes)
-# The kept descriptors' share of the memory budget (matchers/__init__.py: BUILD_BYTES_PER_CELL):
-# a map whose views see more distinct features keeps an even share of them
-DESCRIPTOR_BYTES_PER_CELL = 80
+# The kept descriptors' share of the memory budget (matchers/__init__.py: BUILD_BYTES_PER_CELL): FLANN
+# merges them into a copy of its own while ours exist, so twice this is the peak's share; a map whose
+# views see more distinct features keeps an even share of them
+DESCRIPTOR_BYTES_PER_CELL = 56
 FEATURE_BYTES = 4 * DIMENSIONS + 3 * 8     # a descriptor (float32), its place and orientation
+DEDUPLICATE_ROWS = 256
 
 
 @dataclass(frozen=True)
@@ -81,11 +83,15 @@ def first_of_each(xy: np.ndarray, theta: np.ndarray, descriptors: np.ndarray, o:
     for group in np.split(order, bounds):
         if len(group) < 2:
             continue
-        d = descriptors[group]
-        near = np.linalg.norm(d[:, None] - d[None], axis=2) < o.same_descriptor
-        for i in range(len(group)):
-            if keep[group[i]]:
-                keep[group[i + 1:][near[i, i + 1:]]] = False
+        d = descriptors[group].astype(np.float32)
+        square = (d * d).sum(axis=1)
+        # a busy place (a post seen from a hundred views) has thousands: its distances a block of rows at a time
+        for start in range(0, len(group), DEDUPLICATE_ROWS):
+            near = square[start:start + DEDUPLICATE_ROWS, None] + square[None] - \
+                2 * d[start:start + DEDUPLICATE_ROWS] @ d.T < o.same_descriptor ** 2
+            for k, i in enumerate(range(start, min(start + DEDUPLICATE_ROWS, len(group)))):
+                if keep[group[i]]:
+                    keep[group[i + 1:][near[k, i + 1:]]] = False
     return keep
 
 
@@ -109,15 +115,21 @@ class ViewFeatures:
     def __init__(self, occupancy_map, o: ScanFeatureOptions):
         views = viewpoints(occupancy_map, o)
         xy, theta, descriptors = [np.zeros((0, 2))], [np.zeros(0)], [np.zeros((0, DIMENSIONS), np.float16)]
+        self.seen = 0
         for start in range(0, len(views), VIEW_CHUNK):
-            for seen in view_features(occupancy_map, views[start:start + VIEW_CHUNK], o):
-                xy.append(seen.xy)
-                theta.append(seen.theta)
-                descriptors.append(seen.descriptors.astype(np.float16))    # half, until the duplicates go
+            seen = list(view_features(occupancy_map, views[start:start + VIEW_CHUNK], o))
+            if not seen:
+                continue
+            # duplicates within a chunk (neighbouring views along its rows) go at once, the rest at the end
+            chunk = (np.vstack([f.xy for f in seen]), np.concatenate([f.theta for f in seen]),
+                     np.vstack([f.descriptors for f in seen]).astype(np.float16))    # half, until the end
+            self.seen += len(chunk[0])
+            first = first_of_each(*chunk, o)
+            for part, kept in zip((xy, theta, descriptors), chunk, strict=True):
+                part.append(kept[first])
         self.views = len(views)
         xy, theta, descriptors = np.vstack(xy), np.concatenate(theta), np.vstack(descriptors)
-        self.seen = len(xy)
-        keep = np.flatnonzero(first_of_each(xy, theta, descriptors.astype(np.float32), o)) if len(xy) else []
+        keep = np.flatnonzero(first_of_each(xy, theta, descriptors, o)) if len(xy) else []
         cap = int(DESCRIPTOR_BYTES_PER_CELL * occupancy_map.width * occupancy_map.height / FEATURE_BYTES)
         if len(keep) > cap:       # within the memory budget: an even, seeded share of the places
             keep = np.sort(np.random.default_rng(0).choice(keep, cap, replace=False))
@@ -145,11 +157,13 @@ class ScanFeatureMatcher(Matcher):
             cv2.setRNGSeed(0)
             self.flann.add([self.features.descriptors])
             self.flann.train()
+        # FLANN keeps its own merged copy for the search: ours would only double it
+        self.features.descriptors = np.zeros((0, DIMENSIONS), np.float32)
 
     @property
     def nbytes(self) -> int:
-        """The views' features and the distance field, as kept for the search."""
-        return self.features.nbytes + self.field.nbytes
+        """The views' features (their descriptors in FLANN's copy) and the distance field, as kept for the search."""
+        return self.features.nbytes + len(self.features.xy) * 4 * DIMENSIONS + self.field.nbytes
 
     def correspondences(self, scan) -> tuple | None:
         """(scan keypoint index, map xy, map orientation) arrays: each scan descriptor's
