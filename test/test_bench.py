@@ -67,6 +67,19 @@ def test_the_report_opens_with_one_line_per_suite_against_the_thesis_method():
     assert '| cut | template_ccoeff | 3 | 33% | 67% | 33% | 33% | 2.00 | 2.90 |' in thesis, thesis
 
 
+def test_the_thesis_section_gives_each_proposers_build_per_map():
+    from global_loc.bench.summary import thesis_section
+    rows = [{'suite': 'sim', 'map': 'office', 'method': 'features', 'ok': True, 'ok_loose': True, 'success': True,
+             'time_s': 0.1, 'build_s': 1.8, 'build_mb': 5.4, 'map_cells': 187200},
+            {'suite': 'sim', 'map': 'office', 'method': 'features', 'ok': True, 'ok_loose': True, 'success': True,
+             'time_s': 0.1},                                   # built before: no figures of its own
+            {'suite': 'sim', 'map': 'office', 'method': 'features_orb', 'ok': False, 'ok_loose': False,
+             'success': False, 'time_s': 0.01, 'build_s': 0.01, 'build_mb': None, 'map_cells': 187200}]
+    lines = thesis_section(rows)
+    assert '| office | features | 0.19 M | 1.80 | 5.4 | 29 |' in lines, lines
+    assert '| office | features_orb | 0.19 M | 0.01 | – | – |' in lines, lines
+
+
 @pytest.mark.process
 def test_the_report_is_written_again_from_its_rows_without_running_anything(tmp_path):
     import shutil

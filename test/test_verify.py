@@ -4,7 +4,6 @@ where rotated template matching is confidently wrong by its own verdict (the bes
 next by 1%) are not confident once checked; one it gets right stays right and confident."""
 import json
 
-import numpy as np
 import pytest
 
 from conftest import OFFICE_YAML, seeded_office_scans
@@ -65,24 +64,30 @@ def test_only_a_matcher_that_scores_a_pose_is_a_tracker_and_the_localizer_says_w
     assert localizer.tracker('bnb') is localizer.matcher('bnb')
 
 
-def test_features_on_views_of_the_map_find_scans_the_thesis_features_do_not(office_scans):
-    """ORB on the map image (the thesis's path here) proposes nothing on these scans;
-    SIFT on wall fields of views of the map as the laser would see them finds some, each
-    checked on the map, none confidently wrong."""
-    office, scans = office_scans
-    localizer = Localizer(office)
-    views = [localizer.localize(scan, 'features_views') for scan, _ in scans]
-    thesis = [localizer.localize(scan, 'features_orb') for scan, _ in scans]
-    assert sum(r.success for r in thesis) == 0
-    right = [r.success and pose_correct(r.pose, truth) for r, (_, truth) in zip(views, scans, strict=True)]
-    assert sum(right) >= 2, [r.message for r in views]
-    assert all(ok or not r.success for ok, r in zip(right, views, strict=True))
+def test_where_the_tracker_found_the_proposed_place_its_own_peak_stands_for_it():
+    """A refined proposal carries two of the measures the tracker's verdict reads; the tracker's
+    own peak at that place carries them all (a rival's unknown cells among them), so it is kept."""
+    from global_loc.core.matchers.base import Candidate, Match, MatchOptions, Verdict
+    from global_loc.core.matchers.verify import verify
+    from global_loc.core.transform import Rigid2D
 
+    class Checker:
+        name, distinct_m, distinct_angle = 'bnb', 1.0, 0.35
+        peak = Candidate(Rigid2D(1.0, 0.0, 0.0), 0.64, explained=0.65, see_through=0.0, optimistic=0.9, unknown=0.3)
 
-def test_a_wall_field_falls_from_the_walls_to_zero_at_its_reach():
-    from global_loc.core.local_grid import wall_field
-    image = np.zeros((21, 21), np.uint8)
-    image[10, :] = 255
-    field = wall_field(image, 8.0)
-    # (cv2.DIST_L2 with a 3x3 mask: distances within a few per cent)
-    assert field[10, 5] == 255 and field[0, 5] == 0 and field[14, 5] == pytest.approx(255 * (1 - 4 / 8), abs=8)
+        def fit_at(self, points, pose):
+            return 0.66, 0.0, pose
+
+        def match(self, points, options, progress=None):
+            return Match([Candidate(Rigid2D(5.0, 0.0, 0.0), 0.75, explained=0.75, see_through=0.0), self.peak])
+
+        def distinct(self, candidates):
+            return candidates
+
+        def judge(self, candidates, stopped='', settled='', stats=None):
+            self.judged = candidates
+            return Verdict(Outcome.AMBIGUOUS, 0.0, 'ambiguous')
+
+    checker = Checker()
+    verify('features', [Candidate(Rigid2D(1.1, 0.0, 0.02), 10.0)], None, checker, MatchOptions())
+    assert checker.peak in checker.judged and len(checker.judged) == 2

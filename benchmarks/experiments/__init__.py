@@ -6,6 +6,7 @@ decision records (docs/decisions/) got their numbers; run them from the reposito
     python -m benchmarks.experiments.options_ab --summarize out/settle/rows.jsonl
     python -m benchmarks.experiments.band_replay out/band/rows.jsonl
     python -m benchmarks.experiments.follow_ab --b band_allowance=0.03 --out out/follow_ab
+    python -m benchmarks.experiments.incumbent_ab --poses 8 --scans-per-log 10   # features' proposal seeding bnb
 
 They read the search through its hooks (`BranchAndBoundMatcher.on_peaks`) and set options
 on the matcher's `options`; nothing is patched. Their output goes where --out says (out/ is

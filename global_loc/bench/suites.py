@@ -22,8 +22,8 @@ from ..sim.synthetic_maps import aisles_with_a_box, symmetric_room
 from .carmen import held_out_folds
 
 THESIS_METHODS = ['template_ccoeff', 'template_sqdiff', 'features_orb', 'features_sift']
-# features_views: ours, features matched against views of the map (a proposer checked as the thesis's are)
-METHODS = ['bnb'] + THESIS_METHODS + ['features_views']
+# features: ours, laser keypoints matched against views of the map (a proposer checked as the thesis's are)
+METHODS = ['bnb'] + THESIS_METHODS + ['features']
 # Δα only changes the template matchers; the others run once per scan.
 ANGLE_STEP_METHODS = {'template_ccoeff', 'template_sqdiff'}
 

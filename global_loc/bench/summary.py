@@ -59,7 +59,7 @@ def thesis_section(rows: list[dict]) -> list[str]:
     thesis = [r for r in comparable(rows) if r['method'] != 'bnb' and r.get('angle_step', 5) == 5]
     if not thesis:
         return []
-    lines = ['## The thesis matchers (and features_views), raw and checked', '',
+    lines = ['## The thesis matchers (and features), raw and checked', '',
              'Raw: the matcher\'s own verdict (the best leads the next by 1%), as the thesis reported it. '
              'Checked: the same hypotheses refined and judged by bnb\'s verdict with the rest of the map searched '
              'for a rival (`core/matchers/verify.py`) - what the server publishes. Times include the check.', '',
@@ -70,6 +70,23 @@ def thesis_section(rows: list[dict]) -> list[str]:
         lines.append(f'| {suite} | {method} | {checked["n"]} | {pct(raw["ok"])} | {pct(raw["marked_wrong"])} '
                      f'| {pct(checked["ok"])} | {pct(checked["marked_wrong"])} | {secs(checked["median"])} '
                      f'| {secs(checked["p95"])} |')
+    return lines + [''] + build_table(thesis)
+
+
+def build_table(rows: list[dict]) -> list[str]:
+    """Each proposing matcher's precomputation per map (the worker's first build of it): seconds,
+    and the megabytes it keeps where the matcher counts them (`nbytes`)."""
+    built = [r for r in rows if r.get('build_s') is not None]
+    if not built:
+        return []
+    lines = ['Precomputation per map (built with the map, once per worker process; "kept": what the matcher '
+             'holds for the search, where it counts it):', '',
+             '| map | method | cells | build [s] | kept [MB] | bytes a cell |', '|---' * 6 + '|']
+    for (name, method), rr in sorted(group(built, lambda r: (r['map'], r['method'])).items()):
+        kept, cells = rr[0].get('build_mb'), rr[0].get('map_cells')
+        lines.append(f'| {name} | {method} | {f"{cells / 1e6:.2f} M" if cells else "–"} | {rr[0]["build_s"]:.2f} '
+                     f'| {"–" if kept is None else f"{kept:.1f}"} '
+                     f'| {f"{kept * 1e6 / cells:.0f}" if kept is not None and cells else "–"} |')
     return lines + ['']
 
 

@@ -3,6 +3,7 @@ module of its own because spawned workers cannot import functions from a __main_
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
@@ -34,7 +35,7 @@ def run_job(job):
            'truth': [round(v, 4) for v in trial.truth.as_tuple()]}
     step = trial.condition.get('angle_step', 5)
     try:
-        loc.matcher(method), loc.tracker(method)   # built once per map and worker, not in a trial's time
+        built = precomputed(loc, method)    # built once per map and worker, not in a trial's time
         if trial.points is not None:
             res = loc.localize_points(trial.points, method, step, base_T_laser=trial.base_T_laser)
         else:
@@ -49,6 +50,7 @@ def run_job(job):
                hyp_scores=[round(h.score, 4) for h in res.hypotheses[:4]], message=res.message.split(':')[0],
                twin='its twin' in res.message,
                outcome=res.outcome.label)
+    row.update(built)
     if res.raw is not None:      # a thesis matcher checked on the map: its own verdict too (the thesis's numbers)
         row.update(raw_success=res.raw.success, raw_outcome=res.raw.outcome.label,
                    raw_ok=res.raw.pose is not None and pose_correct(res.raw.pose, trial.truth))
@@ -66,6 +68,22 @@ def run_job(job):
                    ok_loose=pose_correct(res.pose, trial.truth, 0.5, 10.0))
         row.update(covariance_rows(res.pose, res.covariance, trial.truth))
     return row
+
+
+def precomputed(loc: Localizer, method: str) -> dict:
+    """The method's matcher (and its tracker) built for the trial's map; on the build, its
+    seconds and the bytes it keeps (`nbytes`, where the matcher counts them) for the report's
+    table of the thesis matchers' precomputation. Nothing when they were built before."""
+    fresh = method not in loc.prepared()
+    t0 = time.perf_counter()
+    matcher = loc.matcher(method)
+    seconds = time.perf_counter() - t0
+    loc.tracker(method)
+    if not fresh or method == 'bnb':
+        return {}
+    nbytes = getattr(matcher, 'nbytes', None)
+    return {'build_s': round(seconds, 3), 'build_mb': None if nbytes is None else round(nbytes / 1e6, 2),
+            'map_cells': loc.map.width * loc.map.height}
 
 
 def covariance_rows(estimate, covariance, truth) -> dict:

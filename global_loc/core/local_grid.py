@@ -99,12 +99,3 @@ def soften(image: np.ndarray) -> np.ndarray:
     lines a sub-cell apart (rasterization, rotation) then still overlap, and feature
     detectors see gradients instead of dots."""
     return cv2.GaussianBlur(image, (5, 5), 1.0)
-
-
-def wall_field(image: np.ndarray, reach_px: float = 8.0) -> np.ndarray:
-    """255 on obstacle pixels falling linearly to 0 at `reach_px` from the nearest one (a
-    clipped distance transform): a one-pixel line drawing becomes a smooth relief whose
-    corners and ends are blobs, which descriptors find again after a rotation and after
-    the rasterization moved each point by a pixel - on the lines themselves they do not."""
-    distance = cv2.distanceTransform((image == 0).astype(np.uint8), cv2.DIST_L2, 3)
-    return (255.0 * np.clip(1.0 - distance / reach_px, 0.0, 1.0)).astype(np.uint8)

@@ -136,6 +136,11 @@ class FeatureMatcher(LocalFeatureMatcher):
     def prepared(self, image):
         return soften(image)
 
+    @property
+    def nbytes(self) -> int:
+        """The map's descriptors and keypoint pixels, as kept for the search."""
+        return (0 if self.descriptors is None else self.descriptors.nbytes) + self.map_points.nbytes
+
     def pairs(self, keypoints, descriptors):
         if len(self.keypoints) < 3:
             return None

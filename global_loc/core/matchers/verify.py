@@ -49,7 +49,11 @@ def verify(proposer: str, proposals: list[Candidate], points: ScanPoints, checke
     first) and the one verdict on them. `checker`: the map's Tracker (Localizer.tracker)."""
     refined = refined_on_map(checker, proposals, points)
     rivals = checker.match(points, options, progress)
-    union = checker.distinct(sorted(refined + rivals.candidates, key=lambda c: -c.score))
+    # where the tracker found the same place, its own peak stands for it: it carries every
+    # measure its verdict reads (a rival's unknown cells among them), a refined proposal only two
+    found = rivals.candidates
+    alone = [r for r in refined if all(apart(r, c, checker.distinct_m, checker.distinct_angle) for c in found)]
+    union = checker.distinct(sorted(alone + found, key=lambda c: -c.score))
     verdict = checker.judge(union, rivals.stopped, rivals.settled, rivals.stats)
     checked = Match(union, rivals.stats, rivals.stopped, rivals.settled)
     if not verdict.success:
