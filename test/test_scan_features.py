@@ -12,6 +12,7 @@ from global_loc.core.matchers.base import MatchOptions
 from global_loc.core.matchers.point_features import PointFeatureOptions, point_features, rigid_fit
 from global_loc.core.scan import scan_to_points
 from global_loc.core.transform import Rigid2D, pose_correct
+from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import sample_free_poses, simulate_scan
 
 
@@ -41,7 +42,8 @@ def test_features_find_poses_in_a_small_room_the_thesis_features_miss():
     localizer = Localizer(room)
     rng = np.random.default_rng(3)
     poses = sample_free_poses(room, 6, rng, clearance=0.4)
-    scans = [simulate_scan(room, pose, 270.0, 541, 8.0, noise_std=0.01, rng=rng) for pose in poses]
+    laser = LaserConfig(270.0, 541, range_max=8.0, noise_std=0.01, dropout=0.0)
+    scans = [simulate_scan(room, pose, laser, rng=rng) for pose in poses]
     proposed = [localizer.matcher('features').match(scan_to_points(s), MatchOptions()).candidates for s in scans]
     assert sum(bool(c) and pose_correct(c[0].laser_pose, p) for c, p in zip(proposed, poses, strict=True)) >= 5
     ours = right_and_confident([localizer.localize(s, 'features') for s in scans], poses)

@@ -48,22 +48,30 @@ class InFlight:
                 self.count -= 1
 
 
+PEER_CHECKS = 5     # discovery can take seconds on a loaded machine: look a few times, warn once
+
+
 def warn_about_peers_once(node, guarded, callback_group, after_s: float = 3.0):
-    """A timer that checks for peers once, `after_s` after start (discovery has seen them)."""
+    """A timer that looks for peers every `after_s` after start, PEER_CHECKS times at most
+    (discovery may not have seen them at the first look), and says so once."""
+    looks = [0]
+
     def check():
-        timer.cancel()
-        warn_about_peers(node)
+        looks[0] += 1
+        if warn_about_peers(node) or looks[0] >= PEER_CHECKS:
+            timer.cancel()
     timer = node.create_timer(after_s, guarded(check), callback_group=callback_group)
     return timer
 
 
-def warn_about_peers(node) -> None:
+def warn_about_peers(node) -> bool:
     """Another global_loc server on this domain would execute every goal too (both publish
-    poses): said once, as an error."""
+    poses): said, as an error; whether there is one."""
     peers = [ns for name, ns in node.get_node_names_and_namespaces() if name == node.get_name()]
     if len(peers) > 1:
         node.get_logger().error(f'{len(peers)} nodes named {node.get_name()} on this ROS domain: each executes '
                                 f'every goal and publishes its poses; run one per domain or rename one')
+    return len(peers) > 1
 
 
 def wait_for_subscriber(publisher, stopping: threading.Event, timeout_s: float = 10.0, grace_s: float = 0.2) -> bool:
