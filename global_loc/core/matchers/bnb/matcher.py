@@ -165,7 +165,7 @@ class BranchAndBoundMatcher(Matcher):
         hide a wall, for at most bnb.unknown_credit of the scan: kernels), pruned from the
         start by the best leaf's band: every place whose optimistic score reaches it, so
         that a place whose walls the map lacks is never pruned for them and stays a rival
-        (verdict.rival_scores). Run only after a confident answer (any other is not made
+        (verdict.rival_rank). Run only after a confident answer (any other is not made
         confident by a rival) and within what is left of the match's node budget and time;
         it ends as soon as the places found so far, refined and checked for free space,
         make the answer not confident (a rival is proved: the rest cannot make it confident

@@ -85,17 +85,17 @@ LEAD_TOLERANCE = 1e-9
 TWIN_TOLERANCE = math.radians(20.0)
 
 
-def rival_scores(c: Candidate) -> tuple[float, float]:
-    """(ranking score, field score) of another place as a rival of the best. Its ranking
-    score is what the map cannot rule out there: its optimistic score (capped at
-    options.unknown_credit above its evidence when refined: peaks.PeakRefiner) - returns on
-    unknown cells neither explain nor contradict it - less its beams through mapped walls,
-    which the map does contradict. Its field score stays its evidence: the field-score
-    margin keeps the free-space check from vouching for the best alone, and a credit
-    without that check would let a place whose beams cross walls tie the best."""
+def rival_rank(c: Candidate) -> float:
+    """The ranking score of another place as a rival of the best: what the map cannot rule
+    out there. That is its optimistic score (capped at options.unknown_credit above its
+    evidence when refined: peaks.PeakRefiner), since returns on unknown cells neither explain
+    nor contradict it, less its beams through mapped walls, which the map does contradict.
+    Its field score stays its evidence (`explained`): the field-score margin keeps the
+    free-space check from vouching for the best alone, and a credit without that check
+    would let a place whose beams cross walls tie the best."""
     if c.optimistic is None:
-        return c.score, c.explained
-    return max(c.score, c.optimistic * (1.0 - (c.see_through or 0.0))), c.explained
+        return c.score
+    return max(c.score, c.optimistic * (1.0 - (c.see_through or 0.0)))
 
 
 def is_twin(best: Candidate, other: Candidate) -> bool:
@@ -128,7 +128,7 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
     wall, which the map contradicts, so the best's share is its ranking score's). The
     margin is the smaller of the ranking score's and the field score's: the free-space
     check may reorder places but never vouches for one alone. Another place is measured by
-    what the map cannot rule out (rival_scores): returns on unknown cells count for it,
+    what the map cannot rule out (rival_rank): returns on unknown cells count for it,
     not against it, for up to bnb.unknown_credit of the scan - a place whose walls were
     never mapped stays a rival of its fully mapped twin. `localized` needs confidence >=
     min_confidence; otherwise `poor match` when the map explains too little of the scan,
@@ -142,8 +142,8 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
     if not candidates:
         return Verdict(Outcome.NO_MATCH, 0.0, 'bnb found no pose on free space')
     best, others = candidates[0], candidates[1:]
-    ranks, fits = zip(*[rival_scores(c) for c in others], strict=True) if others else ((), ())
-    fit = [best.explained, *fits]
+    ranks = [rival_rank(c) for c in others]
+    fit = [best.explained, *(c.explained for c in others)]
     explained = explained_share(best.score)
     need = needed_lead(explained, opt)
     capped = searched_keep(fit[0], opt.keep_ratio, opt.min_confidence, opt.band_allowance) > opt.keep_ratio
@@ -188,9 +188,7 @@ def ambiguous_verdict(best: Candidate, others: list[Candidate], ranks, figures: 
     twin = '; the closest is the best turned by about 180 deg (a symmetric place: its twin)' \
         if closest is not None and is_twin(best, closest) else ''
     # a rival only for what the map does not say (its evidence alone lies beyond the lead)
-    closest_rank = rival_scores(closest)[0] if closest is not None else 0.0
-    if closest is not None and closest.score / best.score < 1.0 - need <= closest_rank / best.score and \
-            closest_rank > closest.score:
+    if closest is not None and closest.score / best.score < 1.0 - need <= rival_rank(closest) / best.score:
         return Verdict(Outcome.AMBIGUOUS, conf,
                        f'ambiguous: another place, {100 * (closest.unknown or 0.0):.0f}% of its returns on cells the '
                        f'map does not know, could explain the scan as well as the best (what the map does say there '
