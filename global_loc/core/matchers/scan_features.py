@@ -28,9 +28,9 @@ import numpy as np
 from ..pixel_kernels import first_hits
 from ..transform import Rigid2D
 from .base import Candidate, Match, Matcher
+from .features import FLANN_INDEX_KDTREE
 from .point_features import DIMENSIONS, PointFeatureOptions, point_features, pose_votes
 
-FLANN_INDEX_KDTREE = 1
 VIEW_CHUNK = 128              # views ray-cast at a time (their hits: 128 x rays x 8 bytes)
 # The kept descriptors' share of the memory budget (matchers/__init__.py: BUILD_BYTES_PER_CELL): FLANN
 # merges them into a copy of its own while ours exist, so twice this is the peak's share; a map whose
