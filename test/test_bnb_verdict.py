@@ -224,3 +224,16 @@ def test_what_the_map_does_say_still_counts_against_a_place_lifted_by_unknown_ce
     assert judge([best, rival], OPTIONS).success
     crossing_less = lifted(4, 0.749, 0.916, see_through=0.07, unknown=0.1)
     assert judge([best, crossing_less], OPTIONS).outcome == Outcome.AMBIGUOUS
+
+
+def test_peaks_that_refine_to_one_place_are_one_hypothesis():
+    """Two peaks from different bins (the evidence's and the optimistic list's) that
+    refinement brings to within a millimetre of each other are one place: kept twice, the
+    best would tie with itself and a confident answer read `ambiguous`. Poses one peak bin
+    apart (half distinct_m) stay two places."""
+    room = grid_map(walled(60, 240))
+    refiner = BranchAndBoundMatcher(room, BranchAndBoundOptions()).peaks
+    u, v = 40.0, 30.0
+    refined = np.array([[u, v, 0.3, 0.9], [u + 0.01, v, 0.301, 0.9], [u + 11.0, v, 0.3, 0.8]])
+    order = refiner.distinct_order(refined, refined[:, 3])
+    assert order == [0, 2]

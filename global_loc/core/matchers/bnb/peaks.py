@@ -13,6 +13,10 @@ from .grids import PrecomputationGridStack
 from .options import BranchAndBoundOptions
 from .refine import PeakBins, PixelPose, bin_maxima, field_samples, landscape_covariance, refine
 
+# How many times the hypotheses' number of places, by optimistic score, are refined for
+# the strongest rival the map cannot rule out
+RIVAL_PEAKS = 4
+
 
 class PeakRefiner:
     """Per map: turns a search's leaves into ranked hypotheses."""
@@ -22,10 +26,11 @@ class PeakRefiner:
         self.map = occupancy_map
         self.options = options
 
-    def leaf_peaks(self, leaves: np.ndarray, column: int, d0: float, norm: float) -> list[Candidate]:
-        """The distinct places among the leaves (search_step's rows) by one of their scores
-        (column 3: optimistic, 4: evidence): `distinct` on the best leaf of each bin half as
-        wide as distinct_m and distinct_angle - two leaves in one bin are never two places."""
+    def leaf_peaks(self, leaves: np.ndarray, column: int, d0: float, norm: float, count: int) -> list[Candidate]:
+        """The `count` best distinct places among the leaves (search_step's rows) by one of
+        their scores (column 3: optimistic, 4: evidence): `distinct` on the best leaf of each
+        bin half as wide as distinct_m and distinct_angle - two leaves in one bin are never
+        two places."""
         opt = self.options
         frame = self.map.frame
         tu, tv, ta, scores = leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, column] / norm
@@ -33,7 +38,7 @@ class PeakRefiner:
                           PeakBins(opt.distinct_m / self.map.resolution / 2, opt.distinct_angle / 2))
         return distinct([Candidate(frame.pixel_pose_to_world(float(tu[i]), float(tv[i]), float(ta[i] * d0)),
                                    float(scores[i])) for i in bins],
-                        opt.hypotheses, opt.distinct_m, opt.distinct_angle)
+                        count, opt.distinct_m, opt.distinct_angle)
 
     def refine(self, leaves: np.ndarray, pts, d0, points: ScanPoints) -> tuple[list, list, list[Candidate]]:
         """The distinct hypotheses among the leaves (search_step's rows; decided here, once,
@@ -48,9 +53,11 @@ class PeakRefiner:
         opt = self.options
         frame = self.map.frame
         norm = 255.0 * len(pts)
-        peaks = self.leaf_peaks(leaves, 4, d0, norm)
+        peaks = self.leaf_peaks(leaves, 4, d0, norm, opt.hypotheses)
         if len(leaves) and (leaves[:, 3] > leaves[:, 4]).any():
-            peaks += [c for c in self.leaf_peaks(leaves, 3, d0, norm)
+            # the rival is the best by optimistic score x (1 - see-through), known once refined:
+            # more places than the list holds, as the best optimistic ones may cross walls
+            peaks += [c for c in self.leaf_peaks(leaves, 3, d0, norm, RIVAL_PEAKS * opt.hypotheses)
                       if all(apart(c, p, opt.distinct_m, opt.distinct_angle) for p in peaks)]
         starts = [frame.world_pose_to_pixel(c.laser_pose) for c in peaks]
         refined = np.array([refine(self.stack.field, u, v, yaw, pts, self.map.resolution)
@@ -60,7 +67,7 @@ class PeakRefiner:
             (refined[:, 3], [None] * len(refined))
         through = see_through_fractions(self.stack.occupied, refined[:, :3], points, res, opt)
         rank = refined[:, 3] * (1.0 - through)
-        order = list(np.argsort(-rank, kind='stable'))
+        order = self.distinct_order(refined, rank)
         if len(order) > opt.hypotheses:
             rival = max(order[1:], key=lambda i: optimistic[i] * (1 - through[i]))
             order = order[:opt.hypotheses] if rival in order[:opt.hypotheses] else \
@@ -72,6 +79,20 @@ class PeakRefiner:
             out[0].covariance = landscape_covariance(self.stack.field, frame, PixelPose(*refined[order[0], :3]),
                                                      pts, opt.sigma_cells)
         return [c.score for c in peaks], [float(f) for f in refined[:, 3]], out
+
+    def distinct_order(self, refined: np.ndarray, rank: np.ndarray) -> list[int]:
+        """The refined poses' indices best first by rank, each place once: two peaks from
+        different bins may converge on one place when refined (the evidence's and the
+        optimistic list's peak of one place), and two poses within one peak bin (half
+        distinct_m and half distinct_angle, leaf_peaks) are never two places - one of them
+        kept twice would tie with itself."""
+        opt, frame = self.options, self.map.frame
+        poses = [Candidate(frame.pixel_pose_to_world(*row[:3]), 0.0) for row in refined]
+        kept: list[int] = []
+        for i in np.argsort(-rank, kind='stable'):
+            if all(apart(poses[i], poses[j], opt.distinct_m / 2, opt.distinct_angle / 2) for j in kept):
+                kept.append(int(i))
+        return kept
 
     def unknown_scores(self, refined: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, list[float]]:
         """Per refined pose (rows u, v, yaw, fit): what the map cannot rule out there - a
