@@ -7,6 +7,7 @@ import json
 import math
 import os
 import sys
+import threading
 import time
 
 import pytest
@@ -126,6 +127,37 @@ def test_only_broken_sensors_is_an_unusable_scan_saying_each(tmp_path):
         assert result['outcome'] == 'unusable_scan', result
         assert '/points: ViewError: cloud unusable: point cloud has no x/y/z field' in result['message'], result
     finally:
+        publisher.stop()
+        assert server.stop() == 0, server.output()
+
+
+def test_a_laser_that_starts_late_beside_a_broken_cloud_is_waited_for(tmp_path):
+    """The broken cloud's messages come first; the request waits for the laser that has said
+    nothing yet (within its scan timeout) instead of ending on the cloud alone."""
+    env = isolated_env()
+    laser_off = tmp_path / 'laser_off'
+    laser_off.touch()
+    publisher = start_sensors(env, tmp_path / 'sensors.log', TRUTH,
+                              [{'topic': '/scan', 'kind': 'scan', 'silent_if': str(laser_off)},
+                               {'topic': '/points', 'kind': 'cloud_no_xyz'}])
+    server = start_server(env, tmp_path / 'server.log', f'map_yaml:={OFFICE_YAML}', 'scan_topics:=[/scan]',
+                          'cloud_topics:=[/points]', mount_param('points', LIDAR_MOUNT.as_tuple()))
+    waiting = threading.Event()
+
+    def switch_on_once_the_server_waits():       # the laser starts only while the request waits for it
+        while not waiting.wait(0.1):
+            if 'no usable view yet' in server.output():
+                laser_off.unlink()
+                return
+    switch_on = threading.Thread(target=switch_on_once_the_server_waits, daemon=True)
+    try:
+        switch_on.start()
+        code, result = localize(env, '--timeout', '20', '--no-publish')
+        assert code == 0 and result['outcome'] == 'localized', result
+        assert_pose_near(pose_of(result), TRUTH)
+        assert '/points: ViewError: cloud unusable' in result['message'], result['message']
+    finally:
+        waiting.set()
         publisher.stop()
         assert server.stop() == 0, server.output()
 

@@ -28,6 +28,7 @@ from ..core.pose_history import PoseHistory
 from ..core.request import Asked, Request, RequestError, make_request
 from ..core.scan import ScanError, scan_to_points
 from ..core.transform import Rigid2D, format_pose
+from ..core.view import ViewError
 from .convert import ended_result, result_to_msg, scan_from_msg, stamp_seconds
 from .memory import release_free_memory
 from .motion import MotionStart, resolve_by_motion
@@ -147,12 +148,11 @@ class RequestPath:
             localizer.searched(request.maps)
         except (MethodError, MapSetError) as e:
             return self.end_early(Outcome.BAD_GOAL, f'bad request: {e}')
-        newest = self.wait_for_view(job)
-        if newest is None:
-            return self.end_early(Outcome.NO_SCAN, f'no {self.wanted()} within {seconds(request.scan_timeout_s)} s')
         try:
-            view, messages = make_view(self.c.sensors, newest, job.start, self.c.mount, self.c.odometry,
-                                       job.config.view)
+            seen = self.wait_for_view(job)
+            if seen is None:
+                return self.end_early(Outcome.NO_SCAN, f'no {self.wanted()} within {seconds(request.scan_timeout_s)} s')
+            view, messages = seen
             self.log_view(view, messages)
             result, not_confirmed = self.from_stored_pose(job, localizer, view, messages)
             if result is None:
@@ -222,16 +222,31 @@ class RequestPath:
         what = 'scan' if all(s.kind == 'scan' for s in specs) else 'sensor message'
         return f'{what} on {", ".join(s.topic for s in specs)}'
 
-    def wait_for_view(self, job: 'Job'):
-        request, asker = job.request, job.asker
+    def wait_for_view(self, job: 'Job') -> Optional[tuple]:
+        """(view, topic -> message) of the first messages after the request (make_view); None when
+        none arrives within the scan timeout. While none is usable and a sensor has said nothing
+        since the request (one that starts late), its messages are waited for, up to the timeout."""
+        request, asker, sensors = job.request, job.asker, self.c.sensors
         self.c.logger.info(f'localizing ({request.origin}): method {request.method}, waiting up to '
                            f'{seconds(request.scan_timeout_s)} s for a {self.wanted()}')
         asker.feedback(0.0, Stage.WAITING_FOR_SCAN, 0.0)
-        newest = self.c.sensors.wait(job.start, request.scan_timeout_s, job.config.view.merge_window_s,
-                                     asker.cancelled)
-        if newest is not None:
+        since, unusable, end = job.start, None, job.start + request.scan_timeout_s
+        while True:
+            newest = sensors.wait(since, end - since, job.config.view.merge_window_s, asker.cancelled)
+            if newest is None and unusable is not None:
+                raise unusable
+            if newest is None:
+                return None
             asker.feedback(0.05, Stage.PREPARING_SCAN, 0.0)   # local map or points, per method
-        return newest
+            try:
+                return make_view(sensors, newest, job.start, self.c.mount, self.c.odometry, job.config.view)
+            except ViewError as e:
+                silent = [s.topic for s in sensors.specs if newest.get(s.topic, (-math.inf,))[0] < job.start]
+                if not silent or time.monotonic() >= end:
+                    raise
+                self.c.logger.info(f'no usable view yet ({e}); waiting for {", ".join(silent)}',
+                                   throttle_duration_sec=5.0)
+                since, unusable = time.monotonic(), e
 
     def log_view(self, view, messages: dict) -> None:
         if len(self.c.sensors.specs) == 1 and hasattr(next(iter(messages.values())), 'ranges'):
