@@ -8,6 +8,7 @@ from global_loc.core.localizer import Localizer
 from global_loc.core.map_io import load_map_yaml, make_map
 from global_loc.core.map_set import MapSet, MapSetError, MapSetPrior, map_name, named_paths
 from global_loc.core.outcome import Outcome
+from global_loc.core.scan import scan_to_points
 from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import sample_free_poses, simulate_scan
 
@@ -62,6 +63,22 @@ def test_one_map_answers_as_its_localizer_does(office_and_mirror):
     alone, in_set = office.localize(scan), MapSet({'office': office}).localize(scan)
     assert (in_set.outcome, in_set.pose, in_set.confidence, in_set.map) == (alone.outcome, alone.pose,
                                                                             alone.confidence, 'office')
+
+
+def test_a_map_searched_on_from_its_probe_answers_as_a_map_searched_afresh(office_and_mirror):
+    """A map set's probe rounds stop each map's search at a few hundred expansions; its
+    search then goes on from where the probe stopped instead of starting again. The
+    answer is the one a fresh search gives: the same hypotheses, scores and verdict."""
+    office, _, scans = office_and_mirror
+    for scan, _ in scans[:3]:
+        points = scan_to_points(scan)
+        fresh = office.localize_points(points)
+        leaf, done = office.probe(points, 300)
+        assert not done and 0.0 < leaf <= fresh.search_stats.best_leaf
+        resumed = office.localize_points(points)
+        assert [(h.pose, h.score) for h in resumed.hypotheses] == [(h.pose, h.score) for h in fresh.hypotheses]
+        assert (resumed.outcome, resumed.confidence, resumed.message) == (fresh.outcome, fresh.confidence,
+                                                                          fresh.message)
 
 
 def test_a_map_set_names_its_errors():

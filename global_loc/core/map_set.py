@@ -10,8 +10,10 @@ best places is enough: the best map's answer stays confident only when every oth
 best place lies behind it by the lead a confident answer needs at its fit. Proving that no
 place of a map comes that close is far cheaper than finding its best: short probes of every
 map find the best leaf some map reaches, and each map's search then takes it as bnb's
-incumbent (only the band below it is searched). A map whose search stopped early could
-hide a better place: a confident answer then becomes `search incomplete`, saying which map.
+incumbent (only the band below it is searched), going on from where the map's probe
+stopped (bnb keeps a probe's search: its work is not done again). A map whose search
+stopped early could hide a better place: a confident answer then becomes `search
+incomplete`, saying which map.
 """
 from __future__ import annotations
 

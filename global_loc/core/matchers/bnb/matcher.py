@@ -100,6 +100,7 @@ class BranchAndBoundMatcher(Matcher):
         self.searcher = ThreadedSearch(slice_expansions)
         self.peaks = PeakRefiner(self.stack, occupancy_map, self.options)
         self._last_tops = None     # (scan key, its top nodes and tables): see tree_search
+        self._paused = None        # (scan key, search.Paused): a probe's search, see tree_search
         # Called with each match's distinct peaks (their leaf scores), their refined fits and the
         # ranked candidates: what an experiment on the band or the refinement measures
         # (benchmarks/experiments/), read without changing the search. None: nothing called.
@@ -255,10 +256,15 @@ class BranchAndBoundMatcher(Matcher):
         # 2. Branch and bound down to the band below the best leaf (verdict.searched_keep).
         search_start = time.perf_counter()
         resume = self.resume_rule(space, pts, d0, points)
+        # a search of this scan stopped at a smaller explicit budget (a map set's probe) goes on
+        paused, self._paused = self._paused, None
+        paused = paused[1] if paused is not None and paused[0] == key and paused[1].expanded < max_nodes else None
         run = self.searcher.run(SearchInput(self.stack.evidence_planes, tables, self.stack.free),
                                 SearchStart(space, np.stack([tu, tv, ta, bounds], axis=1).astype(np.int64), top,
-                                            int(options.incumbent * 255 * len(pts))),
+                                            int(options.incumbent * 255 * len(pts)), paused),
                                 RunLimits(max_nodes, deadline, progress), self.settled_check(pts, d0, points), resume)
+        if run.paused is not None and options.max_nodes:
+            self._paused = (key, run.paused)
         search_s = time.perf_counter() - search_start
         scores = run.leaves[:, 4] / (255.0 * len(pts))      # evidence
         expansions = int(run.per_level.sum())

@@ -58,14 +58,31 @@ class SearchInput(NamedTuple):
     free: FreeBlocks
 
 
+class Paused(NamedTuple):
+    """A search stopped at its node budget, to go on with a larger one instead of starting
+    again (a map set's probe rounds, then its search): one heap per thread, the leaves
+    found, the expansions per thread and level and in all, the best leaf (raw) and whether
+    it had gone on with Resume's band."""
+    heaps: list
+    found: list
+    per_level: list
+    expanded: int
+    best: int
+    resumed: bool
+
+
 class SearchStart(NamedTuple):
     """Where a search starts: its space (the map, the band's options, the prior), the top
     nodes (rows u, v, a, raw bound) at top_level, and a raw score some place is known to
-    reach (MatchOptions.incumbent), pruned by from the start."""
+    reach (MatchOptions.incumbent), pruned by from the start; or where a search of the
+    same scan and space paused (its top nodes then already expanded). A higher incumbent
+    than the paused search's only prunes more: every node it left reaches the final band
+    or is pruned when taken, as in a search that started with it."""
     space: SearchSpace
     top_nodes: np.ndarray
     top_level: int
     incumbent: int = 0
+    paused: Optional[Paused] = None
 
 
 class RunLimits(NamedTuple):
@@ -92,6 +109,7 @@ class SearchRun(NamedTuple):
     exact: bool              # the whole band was searched
     settled: bool            # `settled` ended it: the band not all searched, the answer not to become confident
     resumed: bool = False    # it went on with Resume's band: the leaves are that band's
+    paused: Optional[Paused] = None     # where it stopped, when the node budget stopped it
 
 
 def search_threads() -> int:
@@ -146,13 +164,12 @@ class ThreadedSearch:
         space, top_level = begin.space, begin.top_level
         max_nodes, deadline, progress = limits
         threads = search_threads()
-        heaps, found = start(given, begin, threads)
-        shared_best = np.zeros(PAD, np.int64)
-        shared_best[0] = max(found[0][:, 4].max(initial=0), begin.incumbent)
-        per_level = [np.zeros(max(top_level + 1, PAD), np.int64) for _ in heaps]   # PAD: see kernels
-        expanded, done = 0, [False] * threads
         held = resume.space if resume is not None else space
-        band = [space]      # the band being expanded: `space`'s, then held's once resumed
+        heaps, found, per_level, expanded, best, resumed = start_or_go_on(given, begin, threads)
+        shared_best = np.zeros(PAD, np.int64)
+        shared_best[0] = max(best, begin.incumbent)
+        done = [False] * threads
+        band = [held if resumed else space]   # the band being expanded: `space`'s, then held's once resumed
         n_points = tables.du.shape[1]
 
         def run(k, budget):
@@ -161,8 +178,10 @@ class ThreadedSearch:
             return n, leaves
 
         def result(exact: bool, ended: bool = False) -> SearchRun:
+            stopped = None if exact or ended or expanded < max_nodes else \
+                Paused(heaps, found, per_level, expanded, int(shared_best[0]), band[0] is not space)
             return SearchRun(kept_leaves(found, band[0], shared_best[0], n_points),
-                             np.sum(per_level, axis=0)[:top_level + 1], exact, ended, band[0] is not space)
+                             np.sum(per_level, axis=0)[:top_level + 1], exact, ended, band[0] is not space, stopped)
 
         while time.monotonic() <= deadline:
             budget = max(1, min(self.slice_expansions, max_nodes - expanded) // threads)
@@ -186,6 +205,17 @@ class ThreadedSearch:
             if progress:   # the server's progress callback raises CanceledError on a cancel request
                 progress(min(0.95, expanded / max_nodes), shared_best[0] / (255.0 * n_points))
         return result(all(done))
+
+
+def start_or_go_on(given: SearchInput, begin: SearchStart, threads: int) -> Paused:
+    """A search's state at its start: begin.paused's (a copy of its leaves list), or the
+    heaps and the dive's leaves of a new one, nothing expanded yet."""
+    paused = begin.paused
+    if paused is not None and len(paused.heaps) == threads:
+        return paused._replace(found=list(paused.found))
+    heaps, found = start(given, begin, threads)
+    per_level = [np.zeros(max(begin.top_level + 1, PAD), np.int64) for _ in heaps]   # PAD: see kernels
+    return Paused(heaps, found, per_level, 0, int(found[0][:, 4].max(initial=0)), False)
 
 
 def start(given: SearchInput, begin: SearchStart, threads: int) -> tuple[list, list[np.ndarray]]:
