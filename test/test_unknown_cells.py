@@ -97,3 +97,20 @@ def test_where_the_map_knows_every_cell_the_scan_reaches_the_answer_is_unchanged
         if checked == 3:
             break
     assert checked == 3
+
+
+def test_a_rival_search_cut_short_says_the_known_cells_were_confident():
+    """The node budget that ends the search for rivals on unknown cells (after a confident
+    answer on the cells the map knows) is never a success, and the message says which part
+    was cut short: on a map mostly unexplored it is the part that costs."""
+    hall, pose = half_turn_symmetric_hall(), POSES[2]
+    scan = simulate_scan(hall, pose, LaserConfig(270, 541, range_max=20.0, noise_std=0.01, dropout=0.0),
+                         rng=np.random.default_rng(1))
+    cut = unmapped_around(hall, pose, 1.5)
+    known_only = Localizer(cut, UNCREDITED).localize(scan)       # the same first search, no rival search
+    assert known_only.success, known_only.message
+    budget = known_only.search_stats.expansions + 1
+    result = Localizer(cut, LocalizerConfig(bnb=BranchAndBoundOptions(max_nodes=budget))).localize(scan)
+    assert result.outcome == Outcome.SEARCH_INCOMPLETE and not result.success, result.message
+    assert result.message.startswith('search incomplete: confident on what the map knows, but the search for a '
+                                     'rival on its unknown cells stopped after'), result.message

@@ -198,7 +198,9 @@ class BranchAndBoundMatcher(Matcher):
                                             evidence),
                                 RunLimits(left, tree.deadline, report), rival_proved)
         expansions = int(first.per_level.sum() + run.per_level.sum())
-        stopped = '' if run.exact or run.settled else stop_reason(expansions, max_nodes, options.max_search_s)
+        stopped = '' if run.exact or run.settled else \
+            f'confident on what the map knows, but the search for a rival on its unknown cells ' \
+            f'{stop_reason(expansions, max_nodes, options.max_search_s)}'
         # a pose both searches kept once, with its optimistic score (an exhaustive second search
         # holds every leaf of the first: its evidence reaches the band)
         leaves = kept_leaves([run.leaves, first.leaves], tree.space, evidence, len(tree.pts))
