@@ -13,11 +13,9 @@ Two scores per pose: the evidence (what the map explains: unknown cells count fo
 nothing), by which the best leaf, and so the band, is chosen; and the optimistic score,
 which the bounds bound and the band is cut by, so that a place is never pruned for what
 the map does not say: unknown cells a beam can reach may hide a wall (the optimistic
-planes), but only as the place's known returns fit: the score is min(optimistic sum,
-evidence sum / (1 - bnb.unknown_credit)) - a place with up to that share of its scan on
-unknown cells counts as if those returns fit as its others do, never better - both sums
-bounded by their own planes (a map without unknown cells has one set, and the two scores
-are one).
+planes), but at most bnb.unknown_credit of the scan is credited that way - the
+score is min(optimistic sum, evidence sum + that share), both sums bounded by their own
+planes (a map without unknown cells has one set, and the two scores are one).
 
 The kernels take named tuples (numba compiles attribute reads to plain loads): `Planes`
 (per map: where a plane's cell is in the one flat array), `ScanTables` (per scan: each
@@ -42,11 +40,11 @@ from .verdict import keep_floor
 # grids.PrecomputationGridStack).
 Planes = namedtuple('Planes', 'flat shift plane_width pad width height evidence')
 # base[h, i]: where the plane point i reads at level h starts; du, dv[row, i]: point i's
-# cell offset at the angle of `row`; level h's rows start at row_start[h]; known_scale: the
-# most a pose's optimistic score may be over its evidence, as a factor in 1024ths
-# (1024 / (1 - bnb.unknown_credit): evidence scaled by known_scale >> 10; a value, not a
-# compiled-in constant, so a change reaches the cached kernels).
-ScanTables = namedtuple('ScanTables', 'base du dv row_start known_scale')
+# cell offset at the angle of `row`; level h's rows start at row_start[h]; credit: the most
+# a pose's optimistic score may exceed its evidence (raw: bnb.unknown_credit of the
+# points taken as explained on unknown cells; a value, not a compiled-in constant, so a
+# change reaches the cached kernels).
+ScanTables = namedtuple('ScanTables', 'base du dv row_start credit')
 # flags[offsets[h] + (v >> h) * width[h] + (u >> h)]: level-h block (u, v) holds a free cell.
 FreeBlocks = namedtuple('FreeBlocks', 'flags offsets width')
 # The map's size in cells, the number of leaf angles, the band's options: nodes bounded at
@@ -90,7 +88,7 @@ def node_bound(planes, tables, u, v, a, h, terms):
         return total, total
     point_values(planes, tables, u, v, a, h, terms, planes.evidence)
     ev = terms.sum()
-    return min(total, (ev * tables.known_scale) >> 10), ev
+    return min(total, ev + tables.credit), ev
 
 
 @njit(cache=True, nogil=True)
@@ -113,16 +111,16 @@ def child_bound(planes, tables, u, v, a, h, parent, parent_rest, ev_parent, ev_r
             if total + parent_rest[i + 1] < floor:
                 return total, total
         return total, total
-    scale = tables.known_scale
+    credit = tables.credit
     ev = 0
     for i in range(tables.du.shape[1]):
         x = u + planes.pad + tables.du[row, i]
         y = v + planes.pad + tables.dv[row, i]
         total += min(plane_value(planes, tables.base[h, i], h, x, y), parent[i])
         ev += min(plane_value(planes, tables.base[h, i] + planes.evidence, h, x, y), ev_parent[i])
-        if min(total + parent_rest[i + 1], ((ev + ev_rest[i + 1]) * scale) >> 10) < floor:
-            return min(total, (ev * scale) >> 10), ev
-    return min(total, (ev * scale) >> 10), ev
+        if min(total + parent_rest[i + 1], ev + ev_rest[i + 1] + credit) < floor:
+            return min(total, ev + credit), ev
+    return min(total, ev + credit), ev
 
 
 @njit(cache=True, nogil=True)
@@ -302,7 +300,7 @@ def warm_up() -> None:
     widths = np.full(2, 4, np.int64)
     planes = Planes(np.zeros(64, np.uint8), zeros, widths, 0, 4, 4, 32)
     du = np.zeros((3, 1), np.int32)
-    tables = ScanTables(np.zeros((2, 1), np.int64), du, du, np.array([0, 2], np.int64), 1024)
+    tables = ScanTables(np.zeros((2, 1), np.int64), du, du, np.array([0, 2], np.int64), 0)
     top = np.zeros((1, 4), np.int64)
     node_bounds(planes, tables, top[:, 0], top[:, 1], top[:, 2], 1)
     space = SearchSpace(2, 2, 2, 0.9, 0.5, 0.03, 0.4, 0.0, 0.0, -1.0, 0.0, -1.0)

@@ -54,7 +54,7 @@ from .search import (
     search_threads,
     top_in_band,
 )
-from .verdict import confident_fit, explained_share, judge, known_scale, needed_lead
+from .verdict import confident_fit, explained_share, judge, needed_lead
 
 
 class TreeSearch(NamedTuple):
@@ -135,7 +135,7 @@ class BranchAndBoundMatcher(Matcher):
             thetas.append((np.arange(0, n_angles, size) + (size - 1) / 2.0) * d0)
         du, dv = offset_tables(np.concatenate(thetas), pts[:, 0] / res, pts[:, 1] / res)   # (rows, points)
         return ScanTables(self.stack.offsets[gid], du, dv, np.array(row_start, np.int64),
-                          known_scale(self.options.unknown_credit))
+                          int(self.options.unknown_credit * 255 * len(pts)))
 
     def bounds(self, level: int, tu, tv, ta, pts, d0) -> np.ndarray:
         """Bounds (level > 0) or exact scores (level 0) of nodes (tu, tv, ta), in [0, 1]."""

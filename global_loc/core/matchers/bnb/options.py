@@ -53,9 +53,8 @@ class BranchAndBoundOptions:
                                                     'hypothesis', (0.0, math.pi))
     see_through_tolerance_cells: float = _option(3.0, "a return's beam is checked for walls up to this many "
                                                       'cells short of its end (noise, grazing beams)', (0.0, 100.0))
-    unknown_credit: float = _option(1.0 / 3.0, 'share of the scan that may count on unknown cells a beam can reach '
-                                               '(a wall the map lacks) as fitting as the place\'s known returns '
-                                               'do (its fit over those): a place whose walls were '
+    unknown_credit: float = _option(1.0 / 3.0, 'share of the scan that may count as explained on unknown cells a '
+                                               'beam can reach (a wall the map lacks): a place whose walls were '
                                                'never mapped stays a rival of its mapped twin (a second search '
                                                'after a confident answer); 0: unknown counts against a place as '
                                                'free space does - faster on maps mostly unexplored, but confidently '

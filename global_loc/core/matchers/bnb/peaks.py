@@ -12,7 +12,6 @@ from .free_space import clear_returns, on_unknown, see_through_fractions
 from .grids import PrecomputationGridStack
 from .options import BranchAndBoundOptions
 from .refine import PeakBins, PixelPose, bin_maxima, field_samples, landscape_covariance, refine
-from .verdict import known_share
 
 # How many times the hypotheses' number of places, by optimistic score, are refined for
 # the strongest rival the map cannot rule out
@@ -98,8 +97,8 @@ class PeakRefiner:
     def unknown_scores(self, refined: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, list[float]]:
         """Per refined pose (rows u, v, yaw, fit): what the map cannot rule out there - a
         return whose beam reaches it through free and unknown cells may have hit a wall the
-        map lacks (the optimistic field there), capped at the fit / (1 - unknown_credit) as
-        the search bounds it (kernels) - and the share of its points on unknown cells so reached."""
+        map lacks (the optimistic field there), capped at unknown_credit above the fit as
+        the search bounds it - and the share of its points on unknown cells so reached."""
         res, opt = self.map.resolution, self.options
         if len(refined) == 0:
             return np.zeros(0), []
@@ -108,5 +107,4 @@ class PeakRefiner:
         optimistic = np.where(clear, field_samples(self.stack.optimistic, refined[:, :3], px, py),
                               field_samples(self.stack.field, refined[:, :3], px, py)).mean(axis=1)
         unknown = (clear & on_unknown(self.stack.occupancy, refined[:, :3], pts, res)).mean(axis=1)
-        lifted = np.clip(optimistic, refined[:, 3], refined[:, 3] / known_share(opt.unknown_credit))
-        return lifted, [float(u) for u in unknown]
+        return np.clip(optimistic, refined[:, 3], refined[:, 3] + opt.unknown_credit), [float(u) for u in unknown]

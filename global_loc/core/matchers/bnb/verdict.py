@@ -85,24 +85,10 @@ LEAD_TOLERANCE = 1e-9
 TWIN_TOLERANCE = math.radians(20.0)
 
 
-def known_share(unknown_credit: float) -> float:
-    """The share of a place's scan its optimistic score is scaled from: a place's returns on
-    unknown cells may count as fitting as its returns on known cells do, for up to
-    unknown_credit of the scan, so its optimistic score is at most its evidence over 1 -
-    unknown_credit (its fit over its known returns) - never lifted above what the map does
-    say there, and a free speck in unknown (no known return) lifted by nothing."""
-    return 1.0 - min(unknown_credit, 0.999)
-
-
-def known_scale(unknown_credit: float) -> int:
-    """1 / known_share as the kernels' integer factor, in 1024ths (kernels.ScanTables)."""
-    return int(round(1024.0 / known_share(unknown_credit)))
-
-
 def rival_rank(c: Candidate) -> float:
     """The ranking score of another place as a rival of the best: what the map cannot rule
-    out there. That is its optimistic score (capped at its evidence / known_share when
-    refined: peaks.PeakRefiner), since returns on unknown cells neither explain
+    out there. That is its optimistic score (capped at options.unknown_credit above its
+    evidence when refined: peaks.PeakRefiner), since returns on unknown cells neither explain
     nor contradict it, less its beams through mapped walls, which the map does contradict.
     Its field score stays its evidence (`explained`): the field-score margin keeps the
     free-space check from vouching for the best alone, and a credit without that check
@@ -143,8 +129,7 @@ def judge(candidates: list[Candidate], options: BranchAndBoundOptions) -> Verdic
     margin is the smaller of the ranking score's and the field score's: the free-space
     check may reorder places but never vouches for one alone. Another place is measured by
     what the map cannot rule out (rival_rank): returns on unknown cells count for it,
-    not against it, for up to bnb.unknown_credit of the scan, as its known returns fit
-    (known_share) - a place whose walls were
+    not against it, for up to bnb.unknown_credit of the scan - a place whose walls were
     never mapped stays a rival of its fully mapped twin. `localized` needs confidence >=
     min_confidence; otherwise `poor match` when the map explains too little of the scan,
     else `ambiguous`.
