@@ -235,5 +235,6 @@ def test_peaks_that_refine_to_one_place_are_one_hypothesis():
     refiner = BranchAndBoundMatcher(room, BranchAndBoundOptions()).peaks
     u, v = 40.0, 30.0
     refined = np.array([[u, v, 0.3, 0.9], [u + 0.01, v, 0.301, 0.9], [u + 11.0, v, 0.3, 0.8]])
-    order = refiner.distinct_order(refined, refined[:, 3])
+    poses = [room.frame.pixel_pose_to_world(*row[:3]) for row in refined]
+    order = refiner.distinct_order(poses, refined[:, 3])
     assert order == [0, 2]

@@ -67,12 +67,13 @@ class PeakRefiner:
             (refined[:, 3], [None] * len(refined))
         through = see_through_fractions(self.stack.occupied, refined[:, :3], points, res, opt)
         rank = refined[:, 3] * (1.0 - through)
-        order = self.distinct_order(refined, rank)
+        poses = [frame.pixel_pose_to_world(*row[:3]) for row in refined]
+        order = self.distinct_order(poses, rank)
         if len(order) > opt.hypotheses:
             rival = max(order[1:], key=lambda i: optimistic[i] * (1 - through[i]))
             order = order[:opt.hypotheses] if rival in order[:opt.hypotheses] else \
                 order[:opt.hypotheses - 1] + [rival]
-        out = [Candidate(frame.pixel_pose_to_world(*refined[i, :3]), float(rank[i]), explained=float(refined[i, 3]),
+        out = [Candidate(poses[i], float(rank[i]), explained=float(refined[i, 3]),
                          see_through=float(through[i]), optimistic=float(optimistic[i]), unknown=unknown[i])
                for i in order]
         if out:
@@ -80,19 +81,17 @@ class PeakRefiner:
                                                      pts, opt.sigma_cells)
         return [c.score for c in peaks], [float(f) for f in refined[:, 3]], out
 
-    def distinct_order(self, refined: np.ndarray, rank: np.ndarray) -> list[int]:
-        """The refined poses' indices best first by rank, each place once: two peaks from
-        different bins may converge on one place when refined (the evidence's and the
-        optimistic list's peak of one place), and two poses within one peak bin (half
-        distinct_m and half distinct_angle, leaf_peaks) are never two places - one of them
-        kept twice would tie with itself."""
-        opt, frame = self.options, self.map.frame
-        poses = [Candidate(frame.pixel_pose_to_world(*row[:3]), 0.0) for row in refined]
-        kept: list[int] = []
-        for i in np.argsort(-rank, kind='stable'):
-            if all(apart(poses[i], poses[j], opt.distinct_m / 2, opt.distinct_angle / 2) for j in kept):
-                kept.append(int(i))
-        return kept
+    def distinct_order(self, poses: list, rank: np.ndarray) -> list[int]:
+        """The refined poses' (laser poses in the world) indices best first by rank, each
+        place once (base.distinct): two peaks from different bins may converge on one place
+        when refined (the evidence's and the optimistic list's peak of one place), and two
+        poses within one peak bin (half distinct_m and half distinct_angle, leaf_peaks) are
+        never two places - one of them kept twice would tie with itself."""
+        opt = self.options
+        ranked = [Candidate(pose, float(r)) for pose, r in zip(poses, rank, strict=True)]
+        index = {id(c): i for i, c in enumerate(ranked)}
+        kept = distinct(ranked, len(ranked), opt.distinct_m / 2, opt.distinct_angle / 2)
+        return [index[id(c)] for c in kept]
 
     def unknown_scores(self, refined: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, list[float]]:
         """Per refined pose (rows u, v, yaw, fit): what the map cannot rule out there - a
