@@ -170,7 +170,8 @@ class BranchAndBoundMatcher(Matcher):
         confident by a rival) and within what is left of the match's node budget and time;
         it ends as soon as the places found so far, refined and checked for free space,
         make the answer not confident (a rival is proved: the rest cannot make it confident
-        again, only add rivals). Returns the tree with both searches' leaves."""
+        again, only add rivals), or once every place the verdict weighs as a rival is found
+        (peaks.PeakRefiner.rivals_settled). Returns the tree with both searches' leaves."""
         first = tree.run
         tu, tv, ta, tables = tree.tops
         top = self.options.levels - 1
@@ -181,14 +182,18 @@ class BranchAndBoundMatcher(Matcher):
 
         slices = [0]
 
-        def rival_proved(leaves: np.ndarray, _top: int) -> bool:
-            # checked after slices 1, 2, 4, 8, ...: a found rival ends the search soon, and a
-            # search that finds none refines its leaves a few times, not once a slice
+        def rival_proved(leaves: np.ndarray, pending: int) -> bool:
+            # refined for a rival after slices 1, 2, 4, 8, ... (a found rival ends it soon, and few
+            # refinements when none is), its rivals checked for all found every 4th slice
             slices[0] += 1
-            if slices[0] & (slices[0] - 1):
+            power_of_two = not slices[0] & (slices[0] - 1)
+            if slices[0] % 4 and not power_of_two:
                 return False
             both = kept_leaves([leaves, first.leaves], tree.space, evidence, len(tree.pts))
-            return not self.judge_exhaustive(self.refine_peaks(both, tree.pts, tree.d0, points), tree.stats).success
+            if self.peaks.rivals_settled(both, tree.d0, len(tree.pts), pending):
+                return True
+            return power_of_two and not self.judge_exhaustive(self.refine_peaks(both, tree.pts, tree.d0, points),
+                                                              tree.stats).success
 
         # the progress reported goes on from where the first search left it (a cancel stops it too)
         report = (lambda fraction, best: progress(0.95, best)) if progress else None

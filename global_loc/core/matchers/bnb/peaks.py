@@ -40,6 +40,21 @@ class PeakRefiner:
                                    float(scores[i])) for i in bins],
                         count, opt.distinct_m, opt.distinct_angle)
 
+    def rivals_settled(self, leaves: np.ndarray, d0: float, n_points: int, top: int) -> bool:
+        """Whether a search for rivals on unknown cells has found every place `refine`
+        weighs as a rival: the RIVAL_PEAKS x hypotheses best distinct places by optimistic
+        score among the leaves (search_step's rows on n_points points, some lifted by
+        unknown cells), the last of them above `top`, the highest bound still pending (raw).
+        A leaf not found yet scores at most `top`: it can neither displace them nor lift a
+        peak bin above them, so the rest of the search would leave the hypotheses and the
+        verdict as they are (the rest of the band is never refined)."""
+        count = RIVAL_PEAKS * self.options.hypotheses
+        if not len(leaves) or not (leaves[:, 3] > leaves[:, 4]).any():
+            return False
+        norm = 255.0 * n_points
+        peaks = self.leaf_peaks(leaves, 3, d0, norm, count)
+        return len(peaks) == count and top < peaks[-1].score * norm
+
     def refine(self, leaves: np.ndarray, pts, d0, points: ScanPoints) -> tuple[list, list, list[Candidate]]:
         """The distinct hypotheses among the leaves (search_step's rows; decided here, once,
         in metres): the best places by evidence, and - where unknown cells lift some
