@@ -164,7 +164,7 @@ def test_the_verdict_on_the_band_has_the_outcome_of_the_verdict_on_the_whole_kee
     whole, tightest = BranchAndBoundOptions(band_allowance=1.0), BranchAndBoundOptions(band_allowance=0.0)
     n_points = 200
     space = SearchSpace(1, 1, 1, OPTIONS.keep_ratio, OPTIONS.min_confidence, 0.0, confident_fit(OPTIONS.min_confidence),
-                        0, 0, -1, 0, -1)
+                        1.0, 0, 0, -1, 0, -1)
     for _ in range(3000):
         best_raw = int(rng.integers(0.3 * 255 * n_points, 255 * n_points))
         raw = np.concatenate([[best_raw], np.floor(best_raw * rng.uniform(0.9, 1.0, rng.integers(0, 6)))])

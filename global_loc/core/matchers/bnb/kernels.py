@@ -49,11 +49,13 @@ ScanTables = namedtuple('ScanTables', 'base du dv row_start credit')
 FreeBlocks = namedtuple('FreeBlocks', 'flags offsets width')
 # The map's size in cells, the number of leaf angles, the band's options: nodes bounded at
 # or above verdict.keep_floor(the best leaf) are expanded (poor_fit: the lowest leaf fit
-# that could be confident, verdict.confident_fit; 0 keeps the band below any best). The search prior: nodes with a cell
+# that could be confident, verdict.confident_fit; 0 keeps the band below any best; poor_band
+# 1 expands the band below a leaf at poor_fit while the best is under it, 0 only holds it:
+# search.ThreadedSearch.run). The search prior: nodes with a cell
 # within region_r cells of pixel (region_u, region_v), an angle within region_w angle steps of
 # angle index region_a; region_r < 0 / region_w < 0: no bound.
 SearchSpace = namedtuple('SearchSpace', 'map_w map_h n_angles keep_ratio min_confidence band_allowance '
-                                       'poor_fit region_u region_v region_r region_a region_w')
+                                       'poor_fit poor_band region_u region_v region_r region_a region_w')
 
 
 @njit(cache=True, nogil=True, inline='always')
@@ -303,7 +305,7 @@ def warm_up() -> None:
     tables = ScanTables(np.zeros((2, 1), np.int64), du, du, np.array([0, 2], np.int64), 0)
     top = np.zeros((1, 4), np.int64)
     node_bounds(planes, tables, top[:, 0], top[:, 1], top[:, 2], 1)
-    space = SearchSpace(2, 2, 2, 0.9, 0.5, 0.03, 0.4, 0.0, 0.0, -1.0, 0.0, -1.0)
+    space = SearchSpace(2, 2, 2, 0.9, 0.5, 0.03, 0.4, 0.0, 0.0, 0.0, -1.0, 0.0, -1.0)
     free = FreeBlocks(np.ones(32, np.uint8), zeros, widths)
     search_step(planes, tables, free, space, space, make_heap(top, 1), np.zeros(1, np.int64), 10, np.zeros(2, np.int64))
     region_mask(space, top[:, 0], top[:, 1], top[:, 2], 1)

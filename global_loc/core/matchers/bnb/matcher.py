@@ -340,7 +340,7 @@ class BranchAndBoundMatcher(Matcher):
                 a, w = (yaw / d0) % n_angles, region.yaw_tolerance / d0
         opt = self.options
         return SearchSpace(self.map.width, self.map.height, n_angles, opt.keep_ratio, opt.min_confidence,
-                           opt.band_allowance, confident_fit(opt.min_confidence), u, v, r, a, w)
+                           opt.band_allowance, confident_fit(opt.min_confidence), 0.0, u, v, r, a, w)
 
     def refine_peaks(self, leaves: np.ndarray, pts, d0, points: ScanPoints) -> list[Candidate]:
         """The distinct hypotheses among the leaves (peaks.PeakRefiner), handed to on_peaks."""

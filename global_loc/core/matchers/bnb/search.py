@@ -159,12 +159,13 @@ class ThreadedSearch:
         highest bound still pending (raw; no leaf not scored yet scores more); True ends the
         search there - for an answer the rest cannot change. resume: once the start's band
         is searched, resume.needed(its leaves) says whether to go on with resume.space's
-        (lower) floor."""
+        (lower) floor. The band below a leaf at poor_fit is always held: expanded once a leaf
+        reaches poor_fit where `space` has poor_band 0 (kernels.SearchSpace)."""
         planes, tables, free = given
         space, top_level = begin.space, begin.top_level
         max_nodes, deadline, progress = limits
         threads = search_threads()
-        held = resume.space if resume is not None else space
+        held = (resume.space if resume is not None else space)._replace(poor_band=1.0)
         heaps, found, per_level, expanded, best, resumed = start_or_go_on(given, begin, threads)
         shared_best = np.zeros(PAD, np.int64)
         shared_best[0] = max(best, begin.incumbent)
@@ -191,8 +192,8 @@ class ThreadedSearch:
                 results = list(self._executor(threads).map(run, range(threads), [budget] * threads))
             expanded += sum(n for n, _ in results)
             found.extend(leaves for _, leaves in results)
-            if all(done) and band[0] is not held and resume.needed(kept_leaves(found, space, shared_best[0],
-                                                                                 n_points)):
+            if all(done) and resume is not None and band[0] is not held and \
+                    resume.needed(kept_leaves(found, space, shared_best[0], n_points)):
                 band[0], done = held, [False] * threads
             elif all(done) or expanded >= max_nodes:     # (the deadline: the loop's condition)
                 break

@@ -50,17 +50,20 @@ def keep_floor(space, best, n_points):
     """The lowest bound (raw, an integer: kernels.SearchSpace's band options) a node needs
     to be expanded, and a leaf to be kept, when the best leaf scores `best` (raw) on
     n_points points: the band below the best - or, while the best is too poor ever to be
-    confident (below space.poor_fit, confident_fit's value; 0: no such floor), the band
-    below a leaf at poor_fit: a place under that floor can neither be confident nor be
-    the rival of an answer that is, so proving the band below a poor best would only rank
-    places that all answer `poor match`. The floor stays non-decreasing and continuous in
-    best (searched_keep's note)."""
+    confident (below space.poor_fit, confident_fit's value; 0: no such floor), poor_fit
+    itself, or with space.poor_band the band below a leaf at poor_fit. No leaf under
+    poor_fit can be confident, and the band below it holds only the rivals of a leaf that
+    reaches it: proving it below a poor best would only rank places that all answer `poor
+    match`. With poor_band the floor is non-decreasing and continuous in best
+    (searched_keep's note); without, it drops once the best reaches poor_fit, so a search
+    floored so holds the nodes of the band below (search.ThreadedSearch.run)."""
     norm = 255.0 * max(n_points, 1)
     fit = best / norm
     lowest = space.poor_fit
     if fit < lowest:
-        return np.int64(math.ceil(searched_keep(lowest, space.keep_ratio, space.min_confidence,
-                                                space.band_allowance) * lowest * norm))
+        band = searched_keep(lowest, space.keep_ratio, space.min_confidence, space.band_allowance) \
+            if space.poor_band else 1.0
+        return np.int64(math.ceil(band * lowest * norm))
     return np.int64(math.ceil(searched_keep(fit, space.keep_ratio, space.min_confidence, space.band_allowance) * best))
 
 
