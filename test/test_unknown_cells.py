@@ -13,8 +13,10 @@ from conftest import grid_map, walled
 from global_loc.bench.unmapped import unmapped_around
 from global_loc.core.localizer import Localizer, LocalizerConfig
 from global_loc.core.map_io import UNKNOWN, make_map
+from global_loc.core.matchers import MatchOptions
 from global_loc.core.matchers.bnb import BranchAndBoundOptions
 from global_loc.core.outcome import Outcome
+from global_loc.core.scan import scan_to_points
 from global_loc.core.transform import Rigid2D, pose_correct
 from global_loc.sim.laser import LaserConfig
 from global_loc.sim.raycast import simulate_scan
@@ -118,3 +120,37 @@ def test_a_rival_search_cut_short_says_the_known_cells_were_confident():
     assert result.outcome == Outcome.SEARCH_INCOMPLETE and not result.success, result.message
     assert result.message.startswith('search incomplete: confident on what the map knows, but the search for a '
                                      'rival on its unknown cells stopped after'), result.message
+
+
+def test_a_search_asked_only_for_fits_leaves_out_the_rival_search():
+    """MatchOptions.unknown_rivals off (the mirror check's search, which compares fits only):
+    the confident first search is the answer, with only its own expansions; on, the rival
+    search finds the true place and the answer is not confident."""
+    hall, pose = half_turn_symmetric_hall(), POSES[2]
+    scan = simulate_scan(hall, pose, LaserConfig(270, 541, range_max=20.0, noise_std=0.01, dropout=0.0),
+                         rng=np.random.default_rng(1))
+    cut = unmapped_around(hall, pose, 1.0)
+    bnb, points = Localizer(cut).matcher('bnb'), scan_to_points(scan)
+    known_only = Localizer(cut, UNCREDITED).matcher('bnb').match(points, MatchOptions())
+    fits = bnb.match(points, MatchOptions(unknown_rivals=False))
+    both = bnb.match(points, MatchOptions())
+    assert bnb.judge(fits.candidates).success and not bnb.judge(both.candidates).success
+    assert fits.stats.expansions < both.stats.expansions
+    assert fits.candidates[0].laser_pose == known_only.candidates[0].laser_pose
+
+
+def test_the_mirror_check_asks_its_search_for_fits_only():
+    """The mirror check compares the mirror image's best fit with the scan's: whether the
+    mirror image's own answer would be confident is not asked, so its search runs no rival
+    search (on real logs that search was a third of the check's time)."""
+    from global_loc.core.matchers.mirror import mirror_verdict
+    hall, pose = half_turn_symmetric_hall(), POSES[2]
+    scan = simulate_scan(hall, pose, LaserConfig(270, 541, range_max=20.0, noise_std=0.01, dropout=0.0),
+                         rng=np.random.default_rng(1))
+    bnb, points = Localizer(unmapped_around(hall, pose, 1.0)).matcher('bnb'), scan_to_points(scan)
+    asked = []
+    search = bnb.match
+    bnb.match = lambda pts, options, progress=None: asked.append(options) or search(pts, options, progress)
+    best = search(points, MatchOptions()).candidates[0]
+    mirror_verdict(bnb, points, best, MatchOptions(), 1000)
+    assert asked and not any(o.unknown_rivals for o in asked)

@@ -117,6 +117,9 @@ class MatchOptions:
     # Node expansions an exhaustive search may spend (0: its own budget, bnb.max_nodes): a
     # check beside the search gets less.
     max_nodes: int = 0
+    # Whether a confident answer on a map with unknown cells is searched for the places the
+    # map cannot rule out (bnb): off for a check that only compares fits (the mirror check).
+    unknown_rivals: bool = True
 
 
 class Matcher(ABC):

@@ -48,8 +48,10 @@ def mirror_verdict(tracker: Tracker, points: ScanPoints, best: Candidate, option
     exhaustive; else (the verdict that replaces a success, '')."""
     lead = min(tracker.lead_needed(best.score), 0.5)
     # only a place beating best by the lead matters: one whose refined fit reaches best / (1 - lead)
+    # (only fits are compared: whether the mirror image's own answer would be confident is not asked)
     found = tracker.match(mirrored(points), dataclasses.replace(options, incumbent=best.score / (1.0 - lead),
-                                                                max_nodes=max(CHECK_MIN_NODES, searched)), progress)
+                                                                max_nodes=max(CHECK_MIN_NODES, searched),
+                                                                unknown_rivals=False), progress)
     note = (f'mirror image checked in part: {found.stopped}, no better fit found by then' if found.stopped
             else '')
     if not found.candidates:

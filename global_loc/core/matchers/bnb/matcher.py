@@ -151,8 +151,8 @@ class BranchAndBoundMatcher(Matcher):
         # 3. Peaks, refined, checked for free space, ranked.
         candidates = self.refine_peaks(tree.run.leaves, tree.pts, tree.d0, points)
         # 4. A confident answer on a map with unknown cells: the places the map cannot rule out.
-        if self.stack.has_unknown and candidates and not tree.stopped and not tree.run.settled and \
-                self.judge_exhaustive(candidates, tree.stats).success:
+        if options.unknown_rivals and self.stack.has_unknown and candidates and not tree.stopped and \
+                not tree.run.settled and self.judge_exhaustive(candidates, tree.stats).success:
             tree = self.unknown_rivals(tree, options, points, progress)
             candidates = self.refine_peaks(tree.run.leaves, tree.pts, tree.d0, points)
         if progress:
