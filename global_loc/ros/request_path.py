@@ -32,7 +32,7 @@ from ..core.view import ViewError
 from .convert import ended_result, result_to_msg, scan_from_msg, stamp_seconds
 from .memory import release_free_memory
 from .motion import MotionStart, resolve_by_motion
-from .sensors import SensorInputs, make_view
+from .sensors import SensorInputs, make_view, silent
 
 CLOCKS_APART_S = 3600.0     # a scan stamped this far from the node's clock: use_sim_time set wrong?
 
@@ -241,10 +241,10 @@ class RequestPath:
             try:
                 return make_view(sensors, newest, job.start, self.c.mount, self.c.odometry, job.config.view)
             except ViewError as e:
-                silent = [s.topic for s in sensors.specs if newest.get(s.topic, (-math.inf,))[0] < job.start]
-                if not silent or time.monotonic() >= end:
+                waited = [s.topic for s in sensors.specs if silent(newest, s.topic, job.start)]
+                if not waited or time.monotonic() >= end:
                     raise
-                self.c.logger.info(f'no usable view yet ({e}); waiting for {", ".join(silent)}',
+                self.c.logger.info(f'no usable view yet ({e}); waiting for {", ".join(waited)}',
                                    throttle_duration_sec=5.0)
                 since, unusable = time.monotonic(), e
 

@@ -256,6 +256,13 @@ def reading_of(spec: SensorSpec, arrival: float, msg, mount: Callable) -> Sensor
     return reading_from_msg(spec.topic, spec.kind == SCAN, msg, lambda: mount(spec, msg.header.frame_id), arrival)
 
 
+def silent(newest: dict, topic: str, since: float) -> bool:
+    """Whether the sensor on `topic` has said nothing since `since` in `newest`
+    (SensorInputs.wait's answer): no message, or only older ones."""
+    arrival, msg = newest.get(topic, (None, None))
+    return msg is None or arrival < since
+
+
 def make_view(inputs: SensorInputs, newest: dict, since: float, mount: Callable, odometry,
               config: ViewConfig) -> tuple[View, dict]:
     """The view of `newest` (SensorInputs.wait's answer) and topic -> its message for the
@@ -263,7 +270,7 @@ def make_view(inputs: SensorInputs, newest: dict, since: float, mount: Callable,
     readings, reasons, messages = {}, {}, {}
     for spec in inputs.specs:
         arrival, msg = newest.get(spec.topic, (None, None))
-        if msg is None or arrival < since:
+        if silent(newest, spec.topic, since):
             reasons[spec.topic] = ('silent: nothing received' if msg is None else
                                    f'silent: nothing since the request (its newest message arrived '
                                    f'{since - arrival:.2f} s before it)')
